@@ -1,0 +1,567 @@
+//! Sampled volumes: the grid of samples every other stage reconstructs from.
+//!
+//! A [`Volume`] keeps its samples as `f32` (the working precision of the whole
+//! pipeline) in x-fastest order, `index = x + nx*(y + ny*z)`, together with the
+//! file's native sample type (reported by `snell info`, and used to size
+//! iso-value suggestions) and its voxel spacing. Sample `(i, j, k)` sits at grid
+//! coordinate `(i, j, k)`; world position is grid coordinate × spacing.
+//!
+//! Readers live in submodules ([`nrrd`], [`nifti`], [`raw`]); all of them decode
+//! through [`decode_samples`] and check sizes against [`limits`] *before*
+//! allocating, so an absurd header is an error message, not an OOM kill.
+
+pub mod limits;
+pub mod nifti;
+pub mod nrrd;
+pub mod raw;
+mod stats;
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+
+pub use stats::{Histogram, VolumeStats};
+
+/// The sample type a file stores, kept for reporting and for writing back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum SampleType {
+    I8,
+    U8,
+    I16,
+    U16,
+    I32,
+    U32,
+    F32,
+    F64,
+}
+
+impl SampleType {
+    /// Bytes per sample on disk.
+    pub fn size(self) -> usize {
+        match self {
+            SampleType::I8 | SampleType::U8 => 1,
+            SampleType::I16 | SampleType::U16 => 2,
+            SampleType::I32 | SampleType::U32 | SampleType::F32 => 4,
+            SampleType::F64 => 8,
+        }
+    }
+
+    pub fn is_float(self) -> bool {
+        matches!(self, SampleType::F32 | SampleType::F64)
+    }
+
+    /// Short name used on the command line (`--type u16`) and in reports.
+    pub fn name(self) -> &'static str {
+        match self {
+            SampleType::I8 => "i8",
+            SampleType::U8 => "u8",
+            SampleType::I16 => "i16",
+            SampleType::U16 => "u16",
+            SampleType::I32 => "i32",
+            SampleType::U32 => "u32",
+            SampleType::F32 => "f32",
+            SampleType::F64 => "f64",
+        }
+    }
+
+    /// Parses the command-line names (`u8`, `int16`, `float`, ...).
+    pub fn parse(s: &str) -> Option<SampleType> {
+        Some(match s.to_ascii_lowercase().as_str() {
+            "i8" | "int8" | "char" | "signed char" => SampleType::I8,
+            "u8" | "uint8" | "uchar" | "unsigned char" => SampleType::U8,
+            "i16" | "int16" | "short" => SampleType::I16,
+            "u16" | "uint16" | "ushort" | "unsigned short" => SampleType::U16,
+            "i32" | "int32" | "int" => SampleType::I32,
+            "u32" | "uint32" | "uint" | "unsigned int" => SampleType::U32,
+            "f32" | "float" | "float32" => SampleType::F32,
+            "f64" | "double" | "float64" => SampleType::F64,
+            _ => return None,
+        })
+    }
+}
+
+impl fmt::Display for SampleType {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+/// Byte order of multi-byte samples.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Endian {
+    Little,
+    Big,
+}
+
+impl Endian {
+    pub fn parse(s: &str) -> Option<Endian> {
+        match s.to_ascii_lowercase().as_str() {
+            "little" | "le" => Some(Endian::Little),
+            "big" | "be" => Some(Endian::Big),
+            _ => None,
+        }
+    }
+}
+
+/// Everything that can go wrong turning a file into a [`Volume`]. Every message
+/// names the file, so the CLI can print it on one line as is.
+#[derive(Debug, thiserror::Error)]
+pub enum VolumeError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {msg}")]
+    Format { path: PathBuf, msg: String },
+    #[error("{path}: {msg}")]
+    Unsupported { path: PathBuf, msg: String },
+    #[error("{path}: data holds {got} bytes but the header needs {need} ({what})")]
+    Truncated {
+        path: PathBuf,
+        need: u64,
+        got: u64,
+        what: String,
+    },
+    #[error("{path}: {msg}")]
+    TooLarge { path: PathBuf, msg: String },
+    #[error(
+        "{path}: {count} non-finite samples ({nan} NaN, {inf} infinite), first at index {first}; pass --allow-nan to replace them"
+    )]
+    NonFinite {
+        path: PathBuf,
+        count: usize,
+        nan: usize,
+        inf: usize,
+        first: usize,
+    },
+    #[error("{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, or raw with --dims and --type)")]
+    UnknownFormat { path: PathBuf },
+    #[error("{0}")]
+    Invalid(String),
+}
+
+impl VolumeError {
+    pub(crate) fn format(path: &Path, msg: impl Into<String>) -> Self {
+        VolumeError::Format {
+            path: path.to_path_buf(),
+            msg: msg.into(),
+        }
+    }
+    pub(crate) fn unsupported(path: &Path, msg: impl Into<String>) -> Self {
+        VolumeError::Unsupported {
+            path: path.to_path_buf(),
+            msg: msg.into(),
+        }
+    }
+    pub(crate) fn io(path: &Path, source: std::io::Error) -> Self {
+        VolumeError::Io {
+            path: path.to_path_buf(),
+            source,
+        }
+    }
+}
+
+/// How to describe a headerless raw file.
+#[derive(Clone, Debug, PartialEq)]
+pub struct RawSpec {
+    pub dims: [usize; 3],
+    pub sample_type: SampleType,
+    pub endian: Endian,
+    pub spacing: [f64; 3],
+    /// Bytes to skip before the first sample.
+    pub offset: u64,
+}
+
+/// Options shared by every reader.
+#[derive(Clone, Debug)]
+pub struct LoadOptions {
+    /// Replace NaN and infinite samples instead of rejecting the file.
+    pub allow_nan: bool,
+    /// Largest allowed working-set size in bytes, checked before allocating.
+    pub memory_limit: u64,
+    /// Treat the input as headerless raw data laid out like this.
+    pub raw: Option<RawSpec>,
+}
+
+impl Default for LoadOptions {
+    fn default() -> Self {
+        LoadOptions {
+            allow_nan: false,
+            memory_limit: limits::default_memory_limit(),
+            raw: None,
+        }
+    }
+}
+
+/// A 3-D grid of samples with its spacing.
+#[derive(Clone, Debug)]
+pub struct Volume {
+    dims: [usize; 3],
+    spacing: [f64; 3],
+    native: SampleType,
+    samples: Vec<f32>,
+    /// Non-finite samples that were replaced on load (`--allow-nan`).
+    pub replaced_nonfinite: usize,
+}
+
+impl Volume {
+    /// Builds a volume from x-fastest samples. Fails when the sample count does
+    /// not match the dims, a dim is 0, or a spacing is not finite and positive.
+    pub fn new(
+        dims: [usize; 3],
+        spacing: [f64; 3],
+        native: SampleType,
+        samples: Vec<f32>,
+    ) -> Result<Volume, VolumeError> {
+        check_dims(dims)?;
+        check_spacing(spacing)?;
+        let n = dims[0] * dims[1] * dims[2];
+        if samples.len() != n {
+            return Err(VolumeError::Invalid(format!(
+                "volume of dims {}x{}x{} needs {} samples, got {}",
+                dims[0],
+                dims[1],
+                dims[2],
+                n,
+                samples.len()
+            )));
+        }
+        Ok(Volume {
+            dims,
+            spacing,
+            native,
+            samples,
+            replaced_nonfinite: 0,
+        })
+    }
+
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+    pub fn spacing(&self) -> [f64; 3] {
+        self.spacing
+    }
+    pub fn native_type(&self) -> SampleType {
+        self.native
+    }
+    pub fn samples(&self) -> &[f32] {
+        &self.samples
+    }
+    pub fn len(&self) -> usize {
+        self.samples.len()
+    }
+    pub fn is_empty(&self) -> bool {
+        self.samples.is_empty()
+    }
+
+    /// Sets the spacing (e.g. from a scene file that overrides the header).
+    pub fn set_spacing(&mut self, spacing: [f64; 3]) -> Result<(), VolumeError> {
+        check_spacing(spacing)?;
+        self.spacing = spacing;
+        Ok(())
+    }
+
+    pub fn index(&self, x: usize, y: usize, z: usize) -> usize {
+        x + self.dims[0] * (y + self.dims[1] * z)
+    }
+
+    pub fn get(&self, x: usize, y: usize, z: usize) -> f32 {
+        self.samples[self.index(x, y, z)]
+    }
+
+    /// World-space extent of the domain: `(n-1) × spacing` per axis.
+    pub fn extent(&self) -> [f64; 3] {
+        std::array::from_fn(|a| (self.dims[a] - 1) as f64 * self.spacing[a])
+    }
+
+    /// Value range, histogram and suggested iso-values.
+    pub fn stats(&self) -> VolumeStats {
+        VolumeStats::compute(self)
+    }
+
+    /// Content hash of dims, spacing and samples, for on-disk caches.
+    pub fn content_hash(&self) -> u64 {
+        let mut h = Fnv64::new();
+        for d in self.dims {
+            h.write(&(d as u64).to_le_bytes());
+        }
+        for s in self.spacing {
+            h.write(&s.to_le_bytes());
+        }
+        for v in &self.samples {
+            h.write(&v.to_bits().to_le_bytes());
+        }
+        h.finish()
+    }
+}
+
+/// FNV-1a, 64 bit: a stable hash (unlike `std`'s) for cache keys.
+pub(crate) struct Fnv64(u64);
+impl Fnv64 {
+    pub(crate) fn new() -> Self {
+        Fnv64(0xcbf2_9ce4_8422_2325)
+    }
+    pub(crate) fn write(&mut self, bytes: &[u8]) {
+        for &b in bytes {
+            self.0 ^= b as u64;
+            self.0 = self.0.wrapping_mul(0x0000_0100_0000_01b3);
+        }
+    }
+    pub(crate) fn finish(&self) -> u64 {
+        self.0
+    }
+}
+
+pub(crate) fn check_dims(dims: [usize; 3]) -> Result<(), VolumeError> {
+    if dims.contains(&0) {
+        return Err(VolumeError::Invalid(format!(
+            "dims {}x{}x{} contain a zero",
+            dims[0], dims[1], dims[2]
+        )));
+    }
+    Ok(())
+}
+
+pub(crate) fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
+    if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
+        return Err(VolumeError::Invalid(format!(
+            "spacing {:?} must be finite and positive",
+            spacing
+        )));
+    }
+    Ok(())
+}
+
+/// Number of samples for `dims`, or an error when the product overflows or the
+/// working set (samples plus prefiltered coefficients, `f32` each) would exceed
+/// `memory_limit`. Called by every reader before it allocates.
+pub fn checked_sample_count(
+    path: &Path,
+    dims: [usize; 3],
+    memory_limit: u64,
+) -> Result<usize, VolumeError> {
+    if dims.contains(&0) {
+        return Err(VolumeError::format(
+            path,
+            format!("dims {}x{}x{} contain a zero", dims[0], dims[1], dims[2]),
+        ));
+    }
+    let n = dims[0]
+        .checked_mul(dims[1])
+        .and_then(|v| v.checked_mul(dims[2]))
+        .ok_or_else(|| VolumeError::TooLarge {
+            path: path.to_path_buf(),
+            msg: format!(
+                "dims {}x{}x{} overflow the sample count",
+                dims[0], dims[1], dims[2]
+            ),
+        })?;
+    limits::check_bytes(
+        path,
+        (n as u64).saturating_mul(limits::WORKING_BYTES_PER_SAMPLE),
+        memory_limit,
+        &format!("a {}x{}x{} volume", dims[0], dims[1], dims[2]),
+    )?;
+    Ok(n)
+}
+
+/// Decodes `count` samples of `ty` in `endian` order from `bytes` into `f32`,
+/// applying `value = raw * slope + inter` when a scaling is given (NIfTI).
+/// Non-finite results are counted and either rejected or replaced per `opts`.
+pub fn decode_samples(
+    path: &Path,
+    bytes: &[u8],
+    ty: SampleType,
+    endian: Endian,
+    count: usize,
+    scale: Option<(f64, f64)>,
+    allow_nan: bool,
+) -> Result<(Vec<f32>, usize), VolumeError> {
+    let need = (count as u64) * ty.size() as u64;
+    if (bytes.len() as u64) < need {
+        return Err(VolumeError::Truncated {
+            path: path.to_path_buf(),
+            need,
+            got: bytes.len() as u64,
+            what: format!("{} samples of {}", count, ty),
+        });
+    }
+    let bytes = &bytes[..need as usize];
+    // Each sample goes through f64 so NIfTI scaling and 32-bit integers keep their
+    // precision until the single rounding to f32; no wide intermediate buffer, so
+    // peak memory stays at the mapped input plus the f32 output.
+    let (slope, inter) = scale.unwrap_or((1.0, 0.0));
+    let mut out: Vec<f32> = Vec::with_capacity(count);
+    macro_rules! dec {
+        ($t:ty, $n:expr) => {{
+            for c in bytes.chunks_exact($n) {
+                let arr: [u8; $n] = c.try_into().expect("chunk of exact size");
+                let v = match endian {
+                    Endian::Little => <$t>::from_le_bytes(arr),
+                    Endian::Big => <$t>::from_be_bytes(arr),
+                };
+                out.push((v as f64 * slope + inter) as f32);
+            }
+        }};
+    }
+    match ty {
+        SampleType::I8 => dec!(i8, 1),
+        SampleType::U8 => dec!(u8, 1),
+        SampleType::I16 => dec!(i16, 2),
+        SampleType::U16 => dec!(u16, 2),
+        SampleType::I32 => dec!(i32, 4),
+        SampleType::U32 => dec!(u32, 4),
+        SampleType::F32 => dec!(f32, 4),
+        SampleType::F64 => dec!(f64, 8),
+    }
+    let mut nan = 0usize;
+    let mut inf = 0usize;
+    let mut first = usize::MAX;
+    for (i, v) in out.iter().enumerate() {
+        if !v.is_finite() {
+            if v.is_nan() {
+                nan += 1;
+            } else {
+                inf += 1;
+            }
+            first = first.min(i);
+        }
+    }
+    let bad = nan + inf;
+    if bad > 0 {
+        if !allow_nan {
+            return Err(VolumeError::NonFinite {
+                path: path.to_path_buf(),
+                count: bad,
+                nan,
+                inf,
+                first,
+            });
+        }
+        replace_nonfinite(&mut out);
+    }
+    Ok((out, bad))
+}
+
+/// Replaces NaN and -inf by the smallest finite sample and +inf by the largest,
+/// so every later stage sees a defined field. An all-non-finite volume becomes 0.
+pub fn replace_nonfinite(samples: &mut [f32]) {
+    let (mut lo, mut hi) = (f32::INFINITY, f32::NEG_INFINITY);
+    for &v in samples.iter() {
+        if v.is_finite() {
+            lo = lo.min(v);
+            hi = hi.max(v);
+        }
+    }
+    if !lo.is_finite() {
+        lo = 0.0;
+        hi = 0.0;
+    }
+    for v in samples.iter_mut() {
+        if v.is_nan() || *v == f32::NEG_INFINITY {
+            *v = lo;
+        } else if *v == f32::INFINITY {
+            *v = hi;
+        }
+    }
+}
+
+/// Loads a volume, choosing the reader from `opts.raw` or the file name.
+pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
+    if let Some(spec) = &opts.raw {
+        return raw::read(path, spec, opts);
+    }
+    let name = path
+        .file_name()
+        .map(|n| n.to_string_lossy().to_ascii_lowercase())
+        .unwrap_or_default();
+    if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+        nrrd::read(path, opts)
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        nifti::read(path, opts)
+    } else {
+        Err(VolumeError::UnknownFormat {
+            path: path.to_path_buf(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn decode_big_endian_u16_and_scaling() {
+        let bytes = [0x01u8, 0x02, 0xff, 0xff];
+        let (v, bad) = decode_samples(
+            Path::new("x"),
+            &bytes,
+            SampleType::U16,
+            Endian::Big,
+            2,
+            Some((2.0, 1.0)),
+            false,
+        )
+        .unwrap();
+        assert_eq!(bad, 0);
+        assert_eq!(v, vec![(0x0102 * 2 + 1) as f32, (65535 * 2 + 1) as f32]);
+    }
+
+    #[test]
+    fn decode_rejects_nan_unless_allowed() {
+        let mut bytes = Vec::new();
+        for v in [1.0f32, f32::NAN, 3.0, f32::INFINITY] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        let p = Path::new("f.raw");
+        let err = decode_samples(p, &bytes, SampleType::F32, Endian::Little, 4, None, false)
+            .unwrap_err();
+        let msg = err.to_string();
+        assert!(msg.contains("f.raw") && msg.contains("1 NaN") && msg.contains("first at index 1"));
+        let (v, bad) =
+            decode_samples(p, &bytes, SampleType::F32, Endian::Little, 4, None, true).unwrap();
+        assert_eq!(bad, 2);
+        assert_eq!(v, vec![1.0, 1.0, 3.0, 3.0]);
+    }
+
+    #[test]
+    fn decode_reports_truncation() {
+        let err = decode_samples(
+            Path::new("t.raw"),
+            &[0u8; 5],
+            SampleType::U16,
+            Endian::Little,
+            3,
+            None,
+            false,
+        )
+        .unwrap_err();
+        assert!(matches!(err, VolumeError::Truncated { need: 6, got: 5, .. }));
+    }
+
+    #[test]
+    fn sample_count_overflow_and_limit() {
+        let p = Path::new("big.nrrd");
+        assert!(matches!(
+            checked_sample_count(p, [usize::MAX, 2, 2], u64::MAX),
+            Err(VolumeError::TooLarge { .. })
+        ));
+        assert!(matches!(
+            checked_sample_count(p, [1024, 1024, 1024], 1 << 20),
+            Err(VolumeError::TooLarge { .. })
+        ));
+        assert!(checked_sample_count(p, [0, 2, 2], u64::MAX).is_err());
+        assert_eq!(checked_sample_count(p, [2, 3, 4], u64::MAX).unwrap(), 24);
+    }
+
+    #[test]
+    fn new_checks_shape() {
+        assert!(Volume::new([2, 2, 2], [1.0; 3], SampleType::U8, vec![0.0; 7]).is_err());
+        assert!(Volume::new([2, 2, 2], [1.0, 0.0, 1.0], SampleType::U8, vec![0.0; 8]).is_err());
+        let v = Volume::new([2, 3, 4], [1.0, 2.0, 3.0], SampleType::U8, vec![0.0; 24]).unwrap();
+        assert_eq!(v.extent(), [1.0, 4.0, 9.0]);
+        assert_eq!(v.index(1, 2, 3), 1 + 2 * (2 + 3 * 3));
+    }
+}
