@@ -9,9 +9,9 @@ use std::path::Path;
 
 use super::VolumeError;
 
-/// Bytes a sample costs while rendering: the `f32` sample, its `f32`
-/// prefiltered coefficient (padded grid, rounded up), and slack for tags.
-pub const WORKING_BYTES_PER_SAMPLE: u64 = 10;
+/// Bytes a sample costs at peak: the `f32` sample, the `f64` prefilter work
+/// grid, the `f32` padded coefficients, and a byte of slack for cell tags.
+pub const WORKING_BYTES_PER_SAMPLE: u64 = 17;
 
 /// Parses `123`, `64K`, `512M`, `20G` (binary units).
 pub fn parse_bytes(s: &str) -> Option<u64> {
@@ -44,9 +44,7 @@ pub fn default_memory_limit() -> u64 {
     {
         return v;
     }
-    available_memory()
-        .map(|m| m / 5 * 4)
-        .unwrap_or(16u64 << 30)
+    available_memory().map(|m| m / 5 * 4).unwrap_or(16u64 << 30)
 }
 
 /// Fails with a message naming `what` when `bytes` exceeds `limit`.

@@ -1,0 +1,169 @@
+//! Reconstruction filters: from samples to a continuous field `f(x)` with an
+//! analytic gradient.
+//!
+//! - [`kernel`]: the kernels as tables of weight polynomials per knot cell;
+//! - [`prefilter`]: exact recursive prefiltering (interpolating and smoothing
+//!   B-splines);
+//! - [`coeffs`]: the padded coefficient grid with a mirrored apron;
+//! - [`field`]: evaluation of value and gradient at points.
+//!
+//! Names follow SPEC.md: `linear`, `catmull-rom`, `bspline2`..`bspline7`,
+//! `smooth-bspline3` (with `λ ≥ 0`).
+
+pub mod coeffs;
+pub mod field;
+pub mod kernel;
+pub mod prefilter;
+
+use std::fmt;
+
+pub use coeffs::Coeffs;
+pub use field::Field;
+pub use kernel::Kernel;
+pub use prefilter::Prefilter;
+
+/// Every filter the command line and scenes accept, in the order reports list them.
+pub const FILTER_NAMES: [&str; 9] = [
+    "linear",
+    "catmull-rom",
+    "bspline2",
+    "bspline3",
+    "bspline4",
+    "bspline5",
+    "bspline6",
+    "bspline7",
+    "smooth-bspline3",
+];
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum FilterError {
+    #[error(
+        "unknown filter '{0}' (expected one of: linear, catmull-rom, bspline2 .. bspline7, smooth-bspline3)"
+    )]
+    Unknown(String),
+    #[error("lambda must be a finite number >= 0, got {0}")]
+    BadLambda(f64),
+}
+
+/// Which reconstruction filter, with its parameter.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum FilterKind {
+    /// Trilinear (the B-spline of degree 1).
+    Linear,
+    /// Keys' cubic convolution, `a = -0.5`.
+    CatmullRom,
+    /// Interpolating B-spline of degree 2..=7 (prefiltered).
+    BSpline(u8),
+    /// Cubic smoothing B-spline with its `λ`.
+    SmoothBSpline3 { lambda: f64 },
+}
+
+impl FilterKind {
+    /// Parses a SPEC.md filter name; `lambda` is used by `smooth-bspline3` only
+    /// but must be valid for every filter (a scene may switch filters with
+    /// `--set`).
+    pub fn parse(name: &str, lambda: f64) -> Result<FilterKind, FilterError> {
+        if !lambda.is_finite() || lambda < 0.0 {
+            return Err(FilterError::BadLambda(lambda));
+        }
+        let kind = match name.trim().to_ascii_lowercase().as_str() {
+            "linear" | "trilinear" | "bspline1" => FilterKind::Linear,
+            "catmull-rom" | "catmullrom" | "cubic-convolution" => FilterKind::CatmullRom,
+            "smooth-bspline3" => FilterKind::SmoothBSpline3 { lambda },
+            other => match other
+                .strip_prefix("bspline")
+                .and_then(|d| d.parse::<u8>().ok())
+            {
+                Some(d @ 2..=7) => FilterKind::BSpline(d),
+                _ => return Err(FilterError::Unknown(name.to_string())),
+            },
+        };
+        Ok(kind)
+    }
+
+    /// The SPEC.md name.
+    pub fn name(&self) -> String {
+        match self {
+            FilterKind::Linear => "linear".into(),
+            FilterKind::CatmullRom => "catmull-rom".into(),
+            FilterKind::BSpline(d) => format!("bspline{d}"),
+            FilterKind::SmoothBSpline3 { .. } => "smooth-bspline3".into(),
+        }
+    }
+
+    /// `λ` for the smoothing spline, 0 otherwise.
+    pub fn lambda(&self) -> f64 {
+        match self {
+            FilterKind::SmoothBSpline3 { lambda } => *lambda,
+            _ => 0.0,
+        }
+    }
+
+    pub fn kernel(&self) -> Kernel {
+        match self {
+            FilterKind::Linear => Kernel::bspline(1),
+            FilterKind::CatmullRom => Kernel::catmull_rom(),
+            FilterKind::BSpline(d) => Kernel::bspline(*d as usize),
+            FilterKind::SmoothBSpline3 { .. } => Kernel::bspline(3),
+        }
+    }
+
+    pub fn prefilter(&self) -> Prefilter {
+        match self {
+            FilterKind::Linear | FilterKind::CatmullRom => Prefilter::identity(),
+            FilterKind::BSpline(d) => Prefilter::bspline(*d as usize),
+            FilterKind::SmoothBSpline3 { lambda } => Prefilter::smoothing_cubic(*lambda),
+        }
+    }
+
+    /// Stable key for caches: name plus the exact bits of λ.
+    pub fn cache_key(&self) -> String {
+        format!("{}-{:016x}", self.name(), self.lambda().to_bits())
+    }
+}
+
+impl fmt::Display for FilterKind {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            FilterKind::SmoothBSpline3 { lambda } => write!(f, "smooth-bspline3(λ={lambda})"),
+            other => f.write_str(&other.name()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn parses_spec_names() {
+        assert_eq!(FilterKind::parse("linear", 0.0), Ok(FilterKind::Linear));
+        assert_eq!(
+            FilterKind::parse("catmull-rom", 0.0),
+            Ok(FilterKind::CatmullRom)
+        );
+        for d in 2..=7u8 {
+            assert_eq!(
+                FilterKind::parse(&format!("bspline{d}"), 0.0),
+                Ok(FilterKind::BSpline(d))
+            );
+        }
+        assert_eq!(
+            FilterKind::parse("smooth-bspline3", 1.0),
+            Ok(FilterKind::SmoothBSpline3 { lambda: 1.0 })
+        );
+        assert!(matches!(
+            FilterKind::parse("bspline8", 0.0),
+            Err(FilterError::Unknown(_))
+        ));
+        assert!(matches!(
+            FilterKind::parse("gauss", 0.0),
+            Err(FilterError::Unknown(_))
+        ));
+        assert_eq!(
+            FilterKind::parse("smooth-bspline3", -1.0),
+            Err(FilterError::BadLambda(-1.0))
+        );
+        assert!(FilterKind::parse("linear", f64::NAN).is_err());
+    }
+}
