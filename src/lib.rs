@@ -1,5 +1,26 @@
 //! snell: refraction through iso-surfaces of sampled volumes, after Li & Mueller,
 //! "Accelerated, High-Quality Refraction Computations for Volume Graphics".
+//!
+//! The pipeline, module by module: [`volume`] (samples and readers) →
+//! [`filter`] (prefilter, continuous field) → [`classify`] and [`lattice`]
+//! (which cells can hold the surface) → [`render`] (rays as SoA packets per
+//! tile through staged queues: generate, entry, traverse, solve, refract,
+//! record) → [`film`] (hit positions and colours). [`reference`] and
+//! [`compare`] measure accuracy against exact ground truth.
 
+// Hot loops index several structure-of-arrays columns by the same lane index;
+// an iterator over one of them would hide that symmetry.
+#![allow(clippy::needless_range_loop)]
+
+pub mod atomic;
+pub mod classify;
+pub mod compare;
+pub mod film;
 pub mod filter;
+pub mod lattice;
+pub mod phantom;
+pub mod reference;
+pub mod render;
+pub mod roots;
+pub mod scene;
 pub mod volume;

@@ -11,7 +11,7 @@ use std::path::PathBuf;
 
 use glam::DVec3;
 use serde_json::Value;
-use snell::filter::{Field, FilterKind, Prefilter};
+use snell::filter::{Field, FilterKind};
 use snell::volume::{SampleType, Volume};
 
 const TOL: f64 = 1e-4;

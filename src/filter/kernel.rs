@@ -98,7 +98,11 @@ impl Kernel {
     /// Where knot cells start relative to sample positions: 0 (knots at integers)
     /// or 0.5 (knots at half-integers, even-degree B-splines).
     pub fn knot_offset(&self) -> f64 {
-        if self.support % 2 == 0 { 0.0 } else { 0.5 }
+        if self.support.is_multiple_of(2) {
+            0.0
+        } else {
+            0.5
+        }
     }
 
     /// Coefficients of `W_j` (lowest power first), `support` entries.

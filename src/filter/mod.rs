@@ -14,6 +14,7 @@ pub mod coeffs;
 pub mod field;
 pub mod kernel;
 pub mod prefilter;
+pub mod restrict;
 
 use std::fmt;
 

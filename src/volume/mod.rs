@@ -136,7 +136,9 @@ pub enum VolumeError {
         inf: usize,
         first: usize,
     },
-    #[error("{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, or raw with --dims and --type)")]
+    #[error(
+        "{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, or raw with --dims and --type)"
+    )]
     UnknownFormat { path: PathBuf },
     #[error("{0}")]
     Invalid(String),
@@ -392,7 +394,9 @@ pub fn decode_samples(
     // Each sample goes through f64 so NIfTI scaling and 32-bit integers keep their
     // precision until the single rounding to f32; no wide intermediate buffer, so
     // peak memory stays at the mapped input plus the f32 output.
-    let (slope, inter) = scale.unwrap_or((1.0, 0.0));
+    // The default intercept is -0.0, not 0.0: `x + -0.0 == x` for every x,
+    // including -0.0, so unscaled float samples keep their exact bits.
+    let (slope, inter) = scale.unwrap_or((1.0, -0.0));
     let mut out: Vec<f32> = Vec::with_capacity(count);
     macro_rules! dec {
         ($t:ty, $n:expr) => {{
@@ -516,8 +520,8 @@ mod tests {
             bytes.extend_from_slice(&v.to_le_bytes());
         }
         let p = Path::new("f.raw");
-        let err = decode_samples(p, &bytes, SampleType::F32, Endian::Little, 4, None, false)
-            .unwrap_err();
+        let err =
+            decode_samples(p, &bytes, SampleType::F32, Endian::Little, 4, None, false).unwrap_err();
         let msg = err.to_string();
         assert!(msg.contains("f.raw") && msg.contains("1 NaN") && msg.contains("first at index 1"));
         let (v, bad) =
@@ -538,7 +542,14 @@ mod tests {
             false,
         )
         .unwrap_err();
-        assert!(matches!(err, VolumeError::Truncated { need: 6, got: 5, .. }));
+        assert!(matches!(
+            err,
+            VolumeError::Truncated {
+                need: 6,
+                got: 5,
+                ..
+            }
+        ));
     }
 
     #[test]

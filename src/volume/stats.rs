@@ -83,8 +83,16 @@ fn suggest_iso(h: &Histogram) -> Vec<f64> {
     let total: u64 = h.counts.iter().sum();
     let mut modes: Vec<usize> = (0..n)
         .filter(|&i| {
-            let left = if i == 0 { f64::NEG_INFINITY } else { smooth[i - 1] };
-            let right = if i + 1 == n { f64::NEG_INFINITY } else { smooth[i + 1] };
+            let left = if i == 0 {
+                f64::NEG_INFINITY
+            } else {
+                smooth[i - 1]
+            };
+            let right = if i + 1 == n {
+                f64::NEG_INFINITY
+            } else {
+                smooth[i + 1]
+            };
             smooth[i] >= left && smooth[i] > right
         })
         // A material worth a surface holds at least 0.2% of the voxels.
@@ -121,6 +129,10 @@ mod tests {
         assert_eq!(st.min, 10.0);
         assert_eq!(st.max, 200.0);
         assert_eq!(st.histogram.counts.iter().sum::<u64>(), n as u64);
-        assert!(st.suggested_iso.iter().any(|&x| (x - 105.0).abs() < 10.0), "{:?}", st.suggested_iso);
+        assert!(
+            st.suggested_iso.iter().any(|&x| (x - 105.0).abs() < 10.0),
+            "{:?}",
+            st.suggested_iso
+        );
     }
 }

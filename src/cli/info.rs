@@ -1,0 +1,78 @@
+//! `snell info`: what is in a volume, and which iso-values to try.
+
+use std::path::PathBuf;
+
+use clap::Args as ClapArgs;
+
+use super::common::VolumeArgs;
+
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// Volume file (.nrrd, .nhdr, .nii, .nii.gz, or raw with --dims/--type).
+    pub volume: PathBuf,
+    /// Print one JSON object instead of text.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub vol: VolumeArgs,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let vol = a.vol.load(&a.volume)?;
+    let st = vol.stats();
+    let d = vol.dims();
+    let sp = vol.spacing();
+    if a.json {
+        let j = serde_json::json!({
+            "path": a.volume.display().to_string(),
+            "dims": d,
+            "type": vol.native_type().name(),
+            "spacing": sp,
+            "extent": vol.extent(),
+            "min": st.min,
+            "max": st.max,
+            "mean": st.mean,
+            "histogram": st.histogram,
+            "suggested_iso": st.suggested_iso,
+            "replaced_nonfinite": vol.replaced_nonfinite,
+        });
+        println!("{j}");
+        return Ok(());
+    }
+    println!("{}", a.volume.display());
+    println!(
+        "  dims     {} x {} x {}  ({} samples)",
+        d[0],
+        d[1],
+        d[2],
+        vol.len()
+    );
+    println!("  type     {}", vol.native_type());
+    println!("  spacing  {} x {} x {}", sp[0], sp[1], sp[2]);
+    let e = vol.extent();
+    println!(
+        "  extent   {:.4} x {:.4} x {:.4} (world units)",
+        e[0], e[1], e[2]
+    );
+    println!("  range    {} .. {}  (mean {:.4})", st.min, st.max, st.mean);
+    println!("  histogram (log scale):");
+    let h = &st.histogram;
+    let maxlog = h
+        .counts
+        .iter()
+        .map(|&c| ((c + 1) as f64).ln())
+        .fold(0.0, f64::max);
+    for (i, chunk) in h.counts.chunks(4).enumerate() {
+        let c: u64 = chunk.iter().sum();
+        let lo = h.min + (i * 4) as f64 * h.bin_width();
+        let bar = if maxlog > 0.0 {
+            ((((c + 1) as f64).ln() / (maxlog + 4f64.ln())) * 50.0) as usize
+        } else {
+            0
+        };
+        println!("    {:>12.4} {:>10} {}", lo, c, "#".repeat(bar));
+    }
+    let iso: Vec<String> = st.suggested_iso.iter().map(|v| format!("{v:.4}")).collect();
+    println!("  iso-values worth trying: {}", iso.join(", "));
+    Ok(())
+}

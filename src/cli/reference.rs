@@ -1,0 +1,57 @@
+//! `snell reference`: the analytic hit positions of a sphere-phantom scene.
+
+use std::path::PathBuf;
+
+use clap::Args as ClapArgs;
+
+use snell::reference::Reference;
+use snell::scene::Scene;
+
+use super::common::check_output;
+
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// Scene file whose volume is a sphere phantom.
+    pub scene: PathBuf,
+    /// Output hit-position EXR.
+    #[arg(long, value_name = "REF.exr")]
+    pub hits: PathBuf,
+    /// Also write the colour image these hits give (PNG).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Override a scene value (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    pub set: Vec<String>,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let scene = Scene::load(&a.scene, &a.set)?;
+    check_output(&a.hits)?;
+    if let Some(o) = &a.output {
+        check_output(o)?;
+    }
+    let r =
+        Reference::from_scene(&scene).map_err(|e| anyhow::anyhow!("{}: {e}", a.scene.display()))?;
+    if r.approximate_holes > 0 {
+        eprintln!(
+            "warning: {} hole(s) reach into the ball's fringe; their reference sphere is approximate",
+            r.approximate_holes
+        );
+    }
+    let hits = r.render(&scene);
+    hits.write_exr(&a.hits)?;
+    if let Some(o) = &a.output {
+        let rgb: Vec<u8> = (0..hits.u.len())
+            .flat_map(|i| {
+                let c = if hits.u[i].is_finite() {
+                    scene.backdrop.color(hits.u[i] as f64, hits.v[i] as f64)
+                } else {
+                    scene.background
+                };
+                c.map(|x| (x.clamp(0.0, 1.0) * 255.0).round() as u8)
+            })
+            .collect();
+        snell::film::write_png_rgb(o, hits.width, hits.height, &rgb)?;
+    }
+    Ok(())
+}

@@ -1,0 +1,149 @@
+//! `snell render`: a scene file to images, hit positions and a profile.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::{Duration, Instant};
+
+use anyhow::Context;
+use clap::Args as ClapArgs;
+
+use snell::render::{self, Prepared};
+use snell::scene::Scene;
+use snell::volume::LoadOptions;
+
+use super::common::check_output;
+
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// Scene file (TOML).
+    pub scene: PathBuf,
+    /// Output image (8-bit PNG).
+    #[arg(short, long)]
+    pub output: PathBuf,
+    /// Also write the hit-position EXR (u, v, events per pixel-centre ray).
+    #[arg(long, value_name = "HITS.exr")]
+    pub hits: Option<PathBuf>,
+    /// Also write the colour image as float EXR.
+    #[arg(long, value_name = "COLOR.exr")]
+    pub exr: Option<PathBuf>,
+    /// Write work counters and per-stage times as JSON.
+    #[arg(long, value_name = "STATS.json")]
+    pub stats: Option<PathBuf>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    pub threads: Option<usize>,
+    /// Override a scene value, e.g. --set surface.ior=1.33 (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Do not print the stats table.
+    #[arg(short, long)]
+    pub quiet: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let scene = Scene::load(&a.scene, &a.set)?;
+    for p in [
+        Some(&a.output),
+        a.hits.as_ref(),
+        a.exr.as_ref(),
+        a.stats.as_ref(),
+    ]
+    .into_iter()
+    .flatten()
+    {
+        check_output(p)?;
+    }
+    let threads = a.threads.unwrap_or(0);
+    if a.threads == Some(0) {
+        anyhow::bail!("--threads must be at least 1");
+    }
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .context("cannot start worker threads")?;
+
+    let load_start = Instant::now();
+    let volume = scene.load_volume(&LoadOptions::default())?;
+    let load_s = load_start.elapsed().as_secs_f64();
+    let (lo, hi) = volume
+        .samples()
+        .iter()
+        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+            (l.min(v), h.max(v))
+        });
+    let iso = scene.surface.iso;
+    if !(iso >= lo as f64 && iso <= hi as f64) {
+        eprintln!(
+            "warning: {}: iso-value {iso} is outside the data range [{lo}, {hi}]; the image shows only the backdrop",
+            a.scene.display()
+        );
+    }
+    let frame = pool.install(|| {
+        let mut prep = Prepared::new(Arc::new(volume), scene.surface.filter);
+        prep.times.load_s = load_s;
+        let tiles = render::tile::tiles(scene.width, scene.height, scene.render.tile).len();
+        let done = AtomicUsize::new(0);
+        std::thread::scope(|s| {
+            let worker = s.spawn(|| render::render(&scene, &prep, Some(&done)));
+            progress_bar(&done, tiles, &worker);
+            worker.join().expect("render thread panicked")
+        })
+    });
+
+    frame.film.write_png(&a.output)?;
+    if let Some(p) = &a.hits {
+        frame.film.write_hits_exr(p)?;
+    }
+    if let Some(p) = &a.exr {
+        frame.film.write_color_exr(p)?;
+    }
+    if let Some(p) = &a.stats {
+        let mut j = frame.stats.to_json();
+        j["scene"] = serde_json::json!(a.scene.display().to_string());
+        j["settings"] = serde_json::to_value(scene.render)?;
+        j["filter"] = serde_json::json!(scene.surface.filter.to_string());
+        snell::atomic::write_atomic(p, |w| {
+            use std::io::Write;
+            serde_json::to_writer_pretty(&mut *w, &j)?;
+            w.write_all(b"\n")
+        })
+        .with_context(|| p.display().to_string())?;
+    }
+    if frame.stats.counters.undefined > 0 {
+        eprintln!(
+            "warning: {} rays ended in an undefined state (reported as background)",
+            frame.stats.counters.undefined
+        );
+    }
+    if !a.quiet {
+        eprint!("{}", frame.stats.table());
+    }
+    Ok(())
+}
+
+/// Shows a bar on stderr once a render has run for a second.
+fn progress_bar<T>(done: &AtomicUsize, total: usize, worker: &std::thread::ScopedJoinHandle<T>) {
+    let start = Instant::now();
+    let mut bar: Option<indicatif::ProgressBar> = None;
+    while !worker.is_finished() {
+        std::thread::sleep(Duration::from_millis(25));
+        if bar.is_none() && start.elapsed() > Duration::from_secs(1) {
+            let b = indicatif::ProgressBar::new(total as u64);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "rendering [{bar:40}] {pos}/{len} tiles, {eta} left",
+                )
+                .expect("valid template")
+                .progress_chars("=> "),
+            );
+            bar = Some(b);
+        }
+        if let Some(b) = &bar {
+            b.set_position(done.load(Ordering::Relaxed) as u64);
+        }
+    }
+    if let Some(b) = bar {
+        b.finish_and_clear();
+    }
+}

@@ -1,0 +1,227 @@
+//! How far two hit-position images are apart: the accuracy measure.
+//!
+//! The error of a pixel is the distance between where its pixel-centre ray
+//! lands on the backdrop in the two images, in backdrop units (and in checker
+//! squares when a square size is known). Pixels where only one image reaches
+//! the backdrop, or where the rays crossed a different number of interfaces,
+//! are counted separately: they are topological disagreements, not distances.
+
+use serde::Serialize;
+
+use crate::film::HitImage;
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CompareError {
+    #[error("images differ in size: {0}x{1} vs {2}x{3}")]
+    Size(u32, u32, u32, u32),
+}
+
+/// Percentiles over the refracted pixels only.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct RefractedStats {
+    pub pixels: usize,
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+}
+
+/// Hit-error statistics of `a` against `b`.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HitComparison {
+    pub pixels: usize,
+    /// Pixels that reach the backdrop in both.
+    pub both_valid: usize,
+    /// Pixels that reach the backdrop in exactly one.
+    pub validity_mismatch: usize,
+    /// Pixels whose event counts differ.
+    pub event_mismatch: usize,
+    /// Share of pixels with equal event counts.
+    pub events_equal_fraction: f64,
+    /// Percentiles of the hit distance over pixels valid in both (backdrop units).
+    pub p50: f64,
+    pub p90: f64,
+    pub p99: f64,
+    pub max: f64,
+    pub mean: f64,
+    /// The same percentiles over pixels whose ray crossed an interface in
+    /// either image (the refracted part, where the error lives).
+    pub refracted: RefractedStats,
+    /// Checker square size the `*_squares` fields are in, if known.
+    pub checker: Option<f64>,
+}
+
+impl HitComparison {
+    /// A distance in checker squares (or backdrop units if no checker).
+    pub fn squares(&self, d: f64) -> f64 {
+        self.checker.map_or(d, |s| d / s)
+    }
+
+    pub fn to_json(&self) -> serde_json::Value {
+        let mut j = serde_json::to_value(self).expect("plain data");
+        if self.checker.is_some() {
+            j["p50_squares"] = self.squares(self.p50).into();
+            j["p90_squares"] = self.squares(self.p90).into();
+            j["p99_squares"] = self.squares(self.p99).into();
+            j["max_squares"] = self.squares(self.max).into();
+            j["refracted"]["p50_squares"] = self.squares(self.refracted.p50).into();
+            j["refracted"]["p90_squares"] = self.squares(self.refracted.p90).into();
+            j["refracted"]["p99_squares"] = self.squares(self.refracted.p99).into();
+        }
+        j
+    }
+
+    pub fn table(&self) -> String {
+        let unit = if self.checker.is_some() {
+            "squares"
+        } else {
+            "units"
+        };
+        let mut s = format!(
+            "{} pixels: {} reach the backdrop in both, {} in only one, {} with different event counts ({:.3}% equal)\n",
+            self.pixels,
+            self.both_valid,
+            self.validity_mismatch,
+            self.event_mismatch,
+            100.0 * self.events_equal_fraction
+        );
+        s.push_str(&format!(
+            "hit error (backdrop units): p50 {:.3e}  p90 {:.3e}  p99 {:.3e}  max {:.3e}  mean {:.3e}\n",
+            self.p50, self.p90, self.p99, self.max, self.mean
+        ));
+        let r = &self.refracted;
+        s.push_str(&format!(
+            "refracted pixels ({}): p50 {:.3e}  p90 {:.3e}  p99 {:.3e} {unit}\n",
+            r.pixels,
+            self.squares(r.p50),
+            self.squares(r.p90),
+            self.squares(r.p99)
+        ));
+        if self.checker.is_some() {
+            s.push_str(&format!(
+                "hit error ({unit}):        p50 {:.3e}  p90 {:.3e}  p99 {:.3e}  max {:.3e}\n",
+                self.squares(self.p50),
+                self.squares(self.p90),
+                self.squares(self.p99),
+                self.squares(self.max)
+            ));
+        }
+        s
+    }
+}
+
+/// Percentile by nearest rank of sorted values (NaN-free).
+pub fn percentile(sorted: &[f64], p: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = ((p / 100.0) * sorted.len() as f64).ceil() as usize;
+    sorted[rank.clamp(1, sorted.len()) - 1]
+}
+
+pub fn compare_hits(
+    a: &HitImage,
+    b: &HitImage,
+    checker: Option<f64>,
+) -> Result<HitComparison, CompareError> {
+    if (a.width, a.height) != (b.width, b.height) {
+        return Err(CompareError::Size(a.width, a.height, b.width, b.height));
+    }
+    let n = a.u.len();
+    let mut d = Vec::with_capacity(n);
+    let mut dr = Vec::new();
+    let (mut validity, mut events) = (0, 0);
+    for i in 0..n {
+        let va = a.u[i].is_finite() && a.v[i].is_finite();
+        let vb = b.u[i].is_finite() && b.v[i].is_finite();
+        if a.events[i] != b.events[i] {
+            events += 1;
+        }
+        match (va, vb) {
+            (true, true) => {
+                let du = a.u[i] as f64 - b.u[i] as f64;
+                let dv = a.v[i] as f64 - b.v[i] as f64;
+                let dist = (du * du + dv * dv).sqrt();
+                d.push(dist);
+                if a.events[i] > 0.0 || b.events[i] > 0.0 {
+                    dr.push(dist);
+                }
+            }
+            (false, false) => {}
+            _ => validity += 1,
+        }
+    }
+    d.sort_by(|x, y| x.total_cmp(y));
+    dr.sort_by(|x, y| x.total_cmp(y));
+    let mean = if d.is_empty() {
+        f64::NAN
+    } else {
+        d.iter().sum::<f64>() / d.len() as f64
+    };
+    Ok(HitComparison {
+        pixels: n,
+        both_valid: d.len(),
+        validity_mismatch: validity,
+        event_mismatch: events,
+        events_equal_fraction: 1.0 - events as f64 / n.max(1) as f64,
+        p50: percentile(&d, 50.0),
+        p90: percentile(&d, 90.0),
+        p99: percentile(&d, 99.0),
+        max: d.last().copied().unwrap_or(f64::NAN),
+        mean,
+        refracted: RefractedStats {
+            pixels: dr.len(),
+            p50: percentile(&dr, 50.0),
+            p90: percentile(&dr, 90.0),
+            p99: percentile(&dr, 99.0),
+        },
+        checker,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn statistics() {
+        let a = HitImage {
+            width: 4,
+            height: 1,
+            u: vec![0.0, 1.0, f32::NAN, 5.0],
+            v: vec![0.0, 0.0, 0.0, 0.0],
+            events: vec![2.0, 2.0, 0.0, 1.0],
+        };
+        let mut b = a.clone();
+        b.u[0] = 3.0;
+        b.v[1] = 0.5;
+        b.u[3] = f32::NAN;
+        b.events[3] = 3.0;
+        let c = compare_hits(&a, &b, Some(2.0)).unwrap();
+        assert_eq!(c.both_valid, 2);
+        assert_eq!(c.validity_mismatch, 1);
+        assert_eq!(c.event_mismatch, 1);
+        assert_eq!(c.max, 3.0);
+        assert_eq!(c.p50, 0.5);
+        assert_eq!(c.squares(c.max), 1.5);
+        assert!(
+            compare_hits(
+                &a,
+                &HitImage {
+                    width: 2,
+                    height: 2,
+                    ..a.clone()
+                },
+                None
+            )
+            .is_err()
+        );
+    }
+
+    #[test]
+    fn nearest_rank() {
+        let v: Vec<f64> = (1..=10).map(|x| x as f64).collect();
+        assert_eq!(percentile(&v, 50.0), 5.0);
+        assert_eq!(percentile(&v, 90.0), 9.0);
+        assert_eq!(percentile(&v, 99.0), 10.0);
+    }
+}

@@ -1,0 +1,221 @@
+//! The film: per-pixel results of a frame, and their files.
+//!
+//! - the hit-position image of SPEC.md (`u`, `v`, `events`, 32-bit float EXR):
+//!   where each pixel-centre ray lands on the backdrop, NaN where it never does
+//!   (the input of PRSS, and how accuracy is checked);
+//! - the colour image, written as 8-bit PNG and optionally float EXR.
+//!
+//! Every file is written atomically (see [`crate::atomic`]).
+
+use std::path::{Path, PathBuf};
+
+use exr::prelude::{
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
+    WritableImage, read_first_flat_layer_from_file,
+};
+
+use crate::atomic::write_atomic;
+use crate::render::tile::TileOut;
+
+#[derive(Debug, thiserror::Error)]
+pub enum FilmError {
+    #[error("{path}: {msg}")]
+    Write { path: PathBuf, msg: String },
+    #[error("{path}: {msg}")]
+    Read { path: PathBuf, msg: String },
+}
+
+/// Per-pixel buffers of a frame, row-major, row 0 at the top.
+#[derive(Clone, Debug)]
+pub struct Film {
+    pub width: u32,
+    pub height: u32,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub events: Vec<f32>,
+    pub color: Vec<[f32; 3]>,
+}
+
+/// The hit-position image alone (what `compare` reads back).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HitImage {
+    pub width: u32,
+    pub height: u32,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub events: Vec<f32>,
+}
+
+impl Film {
+    pub fn new(width: u32, height: u32) -> Film {
+        let n = (width as usize) * (height as usize);
+        Film {
+            width,
+            height,
+            u: vec![f32::NAN; n],
+            v: vec![f32::NAN; n],
+            events: vec![0.0; n],
+            color: vec![[0.0; 3]; n],
+        }
+    }
+
+    /// Copies a tile's results into place.
+    pub fn blit(&mut self, t: &TileOut) {
+        let tw = t.tile.width() as usize;
+        for row in 0..t.tile.height() as usize {
+            let src = row * tw;
+            let dst = (t.tile.y0 as usize + row) * self.width as usize + t.tile.x0 as usize;
+            self.u[dst..dst + tw].copy_from_slice(&t.u[src..src + tw]);
+            self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
+            self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
+            self.color[dst..dst + tw].copy_from_slice(&t.color[src..src + tw]);
+        }
+    }
+
+    pub fn hits(&self) -> HitImage {
+        HitImage {
+            width: self.width,
+            height: self.height,
+            u: self.u.clone(),
+            v: self.v.clone(),
+            events: self.events.clone(),
+        }
+    }
+
+    /// 8-bit RGB PNG of the colour image (values clamped to [0, 1]).
+    pub fn write_png(&self, path: &Path) -> Result<(), FilmError> {
+        let bytes: Vec<u8> = self.color.iter().flat_map(|c| c.map(to_u8)).collect();
+        write_png_rgb(path, self.width, self.height, &bytes)
+    }
+
+    /// Float RGB EXR of the colour image.
+    pub fn write_color_exr(&self, path: &Path) -> Result<(), FilmError> {
+        let c = |k: usize| self.color.iter().map(|p| p[k]).collect::<Vec<f32>>();
+        write_exr_channels(
+            path,
+            self.width,
+            self.height,
+            vec![("R", c(0)), ("G", c(1)), ("B", c(2))],
+        )
+    }
+
+    /// The SPEC.md hit-position EXR.
+    pub fn write_hits_exr(&self, path: &Path) -> Result<(), FilmError> {
+        self.hits().write_exr(path)
+    }
+}
+
+impl HitImage {
+    pub fn write_exr(&self, path: &Path) -> Result<(), FilmError> {
+        write_exr_channels(
+            path,
+            self.width,
+            self.height,
+            vec![
+                ("u", self.u.clone()),
+                ("v", self.v.clone()),
+                ("events", self.events.clone()),
+            ],
+        )
+    }
+
+    /// Reads a hit-position EXR (channels `u`, `v`, `events`).
+    pub fn read_exr(path: &Path) -> Result<HitImage, FilmError> {
+        let err = |msg: String| FilmError::Read {
+            path: path.to_path_buf(),
+            msg,
+        };
+        let image = read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
+        let layer = &image.layer_data;
+        let size = layer.size;
+        let channel = |name: &str| -> Result<Vec<f32>, FilmError> {
+            layer
+                .channel_data
+                .list
+                .iter()
+                .find(|c| c.name.eq(name))
+                .map(|c| c.sample_data.values_as_f32().collect())
+                .ok_or_else(|| err(format!("no channel '{name}' (not a hit-position image)")))
+        };
+        Ok(HitImage {
+            width: size.width() as u32,
+            height: size.height() as u32,
+            u: channel("u")?,
+            v: channel("v")?,
+            events: channel("events")?,
+        })
+    }
+}
+
+fn to_u8(v: f32) -> u8 {
+    (v.clamp(0.0, 1.0) * 255.0).round() as u8
+}
+
+/// Writes an 8-bit RGB PNG atomically.
+pub fn write_png_rgb(path: &Path, width: u32, height: u32, rgb: &[u8]) -> Result<(), FilmError> {
+    use image::ImageEncoder;
+    write_atomic(path, |w| {
+        image::codecs::png::PngEncoder::new(w)
+            .write_image(rgb, width, height, image::ExtendedColorType::Rgb8)
+            .map_err(std::io::Error::other)
+    })
+    .map_err(|e| FilmError::Write {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    })
+}
+
+/// Writes named 32-bit float channels as a single-layer EXR atomically.
+pub fn write_exr_channels(
+    path: &Path,
+    width: u32,
+    height: u32,
+    channels: Vec<(&str, Vec<f32>)>,
+) -> Result<(), FilmError> {
+    let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
+        .into_iter()
+        .map(|(name, data)| AnyChannel::new(name, FlatSamples::F32(data)))
+        .collect();
+    let layer = Layer::new(
+        (width as usize, height as usize),
+        LayerAttributes::named("snell"),
+        Encoding::SMALL_LOSSLESS,
+        AnyChannels::sort(list),
+    );
+    let image = Image::from_layer(layer);
+    write_atomic(path, |w| {
+        image
+            .write()
+            .to_buffered(w)
+            .map_err(|e| std::io::Error::other(e.to_string()))
+    })
+    .map_err(|e| FilmError::Write {
+        path: path.to_path_buf(),
+        msg: e.to_string(),
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn hits_round_trip_with_nan() {
+        let dir = std::env::temp_dir().join(format!("snell-film-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let mut f = Film::new(3, 2);
+        f.u = vec![0.5, f32::NAN, -2.0, 1e6, 0.0, 3.25];
+        f.v = vec![1.0, f32::NAN, 2.0, -1e-6, 0.0, 7.0];
+        f.events = vec![2.0, 32.0, 0.0, 4.0, 0.0, 1.0];
+        let p = dir.join("hits.exr");
+        f.write_hits_exr(&p).unwrap();
+        let h = HitImage::read_exr(&p).unwrap();
+        assert_eq!((h.width, h.height), (3, 2));
+        assert_eq!(h.events, f.events);
+        for (a, b) in h.u.iter().zip(&f.u) {
+            assert!(a == b || (a.is_nan() && b.is_nan()));
+        }
+        f.write_png(&dir.join("c.png")).unwrap();
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+}

@@ -1,0 +1,492 @@
+//! Synthetic volumes with known ground truth: the paper's glass sphere (with
+//! optional air holes) and the Marschner–Lobb test signal.
+//!
+//! Both are described by plain specs that deserialize from scene files
+//! (`[volume.phantom]`) and map one-to-one onto `snell phantom` options. Noise
+//! is counter-based (a hash of seed and voxel index), so a phantom is the same
+//! bits whatever the thread count.
+
+use rayon::prelude::*;
+use serde::{Deserialize, Serialize};
+
+use crate::volume::{SampleType, Volume};
+
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PhantomError {
+    #[error("phantom {0}")]
+    Invalid(String),
+}
+
+/// Sample encoding of a phantom.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Serialize, Deserialize, Default)]
+#[serde(rename_all = "lowercase")]
+pub enum PhantomFormat {
+    /// Values in 0..1 as `f32`.
+    #[default]
+    F32,
+    /// `round(255·v)`.
+    U8,
+    /// `round(65535·v)`.
+    U16,
+}
+
+impl PhantomFormat {
+    pub fn parse(s: &str) -> Option<PhantomFormat> {
+        match s.to_ascii_lowercase().as_str() {
+            "f32" | "float" => Some(PhantomFormat::F32),
+            "u8" | "uint8" => Some(PhantomFormat::U8),
+            "u16" | "uint16" => Some(PhantomFormat::U16),
+            _ => None,
+        }
+    }
+
+    /// Value of `1.0` in output units.
+    pub fn full_scale(self) -> f64 {
+        match self {
+            PhantomFormat::F32 => 1.0,
+            PhantomFormat::U8 => 255.0,
+            PhantomFormat::U16 => 65535.0,
+        }
+    }
+
+    fn sample_type(self) -> SampleType {
+        match self {
+            PhantomFormat::F32 => SampleType::F32,
+            PhantomFormat::U8 => SampleType::U8,
+            PhantomFormat::U16 => SampleType::U16,
+        }
+    }
+
+    /// Encodes a value in output units (noise already added).
+    fn encode(self, v: f64) -> f32 {
+        match self {
+            PhantomFormat::F32 => v as f32,
+            PhantomFormat::U8 => v.round().clamp(0.0, 255.0) as f32,
+            PhantomFormat::U16 => v.round().clamp(0.0, 65535.0) as f32,
+        }
+    }
+}
+
+/// A spherical air hole carved into the sphere.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Hole {
+    pub center: [f64; 3],
+    pub radius: f64,
+    #[serde(default)]
+    pub sigma: f64,
+}
+
+/// The paper's "constant-valued sphere with a Gaussian fringe".
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SphereSpec {
+    #[serde(default = "default_size")]
+    pub size: usize,
+    #[serde(default = "default_radius")]
+    pub radius: f64,
+    #[serde(default = "default_sigma")]
+    pub sigma: f64,
+    /// Default: the volume centre `((size-1)/2)·(1,1,1)`.
+    #[serde(default)]
+    pub center: Option<[f64; 3]>,
+    #[serde(default)]
+    pub holes: Vec<Hole>,
+    #[serde(default)]
+    pub format: PhantomFormat,
+    /// Standard deviation of additive Gaussian noise, in output units.
+    #[serde(default)]
+    pub noise: f64,
+    #[serde(default)]
+    pub seed: u64,
+}
+
+fn default_size() -> usize {
+    64
+}
+fn default_radius() -> f64 {
+    20.0
+}
+fn default_sigma() -> f64 {
+    3.0
+}
+fn default_ml_size() -> usize {
+    41
+}
+fn default_alpha() -> f64 {
+    0.25
+}
+fn default_fm() -> f64 {
+    6.0
+}
+
+impl Default for SphereSpec {
+    fn default() -> Self {
+        SphereSpec {
+            size: default_size(),
+            radius: default_radius(),
+            sigma: default_sigma(),
+            center: None,
+            holes: Vec::new(),
+            format: PhantomFormat::F32,
+            noise: 0.0,
+            seed: 0,
+        }
+    }
+}
+
+/// Radial profile: 1 inside `radius`, a Gaussian fringe of width `sigma` beyond.
+#[inline]
+pub fn fringe(r: f64, radius: f64, sigma: f64) -> f64 {
+    if r <= radius {
+        1.0
+    } else if sigma <= 0.0 {
+        0.0
+    } else {
+        let d = (r - radius) / sigma;
+        (-0.5 * d * d).exp()
+    }
+}
+
+/// Where `fringe` equals `level` (0 < level ≤ 1): the iso-surface radius.
+pub fn fringe_radius(radius: f64, sigma: f64, level: f64) -> Option<f64> {
+    if !(level > 0.0 && level <= 1.0) {
+        return None;
+    }
+    Some(radius + sigma * (2.0 * (1.0 / level).ln()).sqrt())
+}
+
+impl SphereSpec {
+    pub fn center(&self) -> [f64; 3] {
+        self.center.unwrap_or([(self.size as f64 - 1.0) / 2.0; 3])
+    }
+
+    /// Noise-free value in 0..1 at grid point `p`.
+    pub fn value(&self, p: [f64; 3]) -> f64 {
+        let c = self.center();
+        let r = dist(p, c);
+        let mut v = fringe(r, self.radius, self.sigma);
+        for h in &self.holes {
+            v *= 1.0 - fringe(dist(p, h.center), h.radius, h.sigma);
+        }
+        v
+    }
+
+    pub fn validate(&self) -> Result<(), PhantomError> {
+        if self.size == 0 || self.size > 4096 {
+            return Err(PhantomError::Invalid(format!(
+                "size {} must be in 1..=4096",
+                self.size
+            )));
+        }
+        let finite = |x: f64| x.is_finite();
+        if !finite(self.radius) || self.radius < 0.0 {
+            return Err(PhantomError::Invalid(format!(
+                "radius {} must be >= 0",
+                self.radius
+            )));
+        }
+        if !finite(self.sigma) || self.sigma < 0.0 {
+            return Err(PhantomError::Invalid(format!(
+                "sigma {} must be >= 0",
+                self.sigma
+            )));
+        }
+        if !finite(self.noise) || self.noise < 0.0 {
+            return Err(PhantomError::Invalid(format!(
+                "noise {} must be >= 0",
+                self.noise
+            )));
+        }
+        if self
+            .center
+            .is_some_and(|c| !c.iter().all(|v| v.is_finite()))
+        {
+            return Err(PhantomError::Invalid("center must be finite".into()));
+        }
+        for h in &self.holes {
+            if !h.center.iter().all(|v| v.is_finite())
+                || !finite(h.radius)
+                || h.radius < 0.0
+                || !finite(h.sigma)
+                || h.sigma < 0.0
+            {
+                return Err(PhantomError::Invalid(format!(
+                    "hole {:?} needs a finite center and radius, sigma >= 0",
+                    h
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    pub fn build(&self) -> Result<Volume, PhantomError> {
+        self.validate()?;
+        let n = self.size;
+        build_grid([n; 3], self.format, self.noise, self.seed, |p| {
+            self.value(p)
+        })
+    }
+}
+
+/// Marschner & Lobb (1994): a slowly varying signal with a high-frequency
+/// radial ripple near the Nyquist limit of its standard 41³ sampling.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct MarschnerLobbSpec {
+    #[serde(default = "default_ml_size")]
+    pub size: usize,
+    #[serde(default = "default_alpha")]
+    pub alpha: f64,
+    #[serde(default = "default_fm")]
+    pub fm: f64,
+    #[serde(default)]
+    pub format: PhantomFormat,
+    #[serde(default)]
+    pub noise: f64,
+    #[serde(default)]
+    pub seed: u64,
+}
+
+impl Default for MarschnerLobbSpec {
+    fn default() -> Self {
+        MarschnerLobbSpec {
+            size: default_ml_size(),
+            alpha: default_alpha(),
+            fm: default_fm(),
+            format: PhantomFormat::F32,
+            noise: 0.0,
+            seed: 0,
+        }
+    }
+}
+
+impl MarschnerLobbSpec {
+    /// The continuous signal at `(x, y, z) ∈ [-1, 1]³`, in 0..1.
+    pub fn signal(&self, x: f64, y: f64, z: f64) -> f64 {
+        use std::f64::consts::PI;
+        let r = (x * x + y * y).sqrt();
+        let rho_r = (2.0 * PI * self.fm * (PI * r / 2.0).cos()).cos();
+        (1.0 - (PI * z / 2.0).sin() + self.alpha * (1.0 + rho_r)) / (2.0 * (1.0 + self.alpha))
+    }
+
+    /// Grid coordinate → the signal's `[-1, 1]` coordinate.
+    pub fn to_unit(&self, g: f64) -> f64 {
+        if self.size < 2 {
+            0.0
+        } else {
+            -1.0 + 2.0 * g / (self.size as f64 - 1.0)
+        }
+    }
+
+    pub fn validate(&self) -> Result<(), PhantomError> {
+        if self.size == 0 || self.size > 4096 {
+            return Err(PhantomError::Invalid(format!(
+                "size {} must be in 1..=4096",
+                self.size
+            )));
+        }
+        if !self.alpha.is_finite()
+            || !self.fm.is_finite()
+            || !self.noise.is_finite()
+            || self.noise < 0.0
+        {
+            return Err(PhantomError::Invalid(
+                "alpha, fm must be finite and noise >= 0".into(),
+            ));
+        }
+        Ok(())
+    }
+
+    pub fn build(&self) -> Result<Volume, PhantomError> {
+        self.validate()?;
+        let n = self.size;
+        build_grid([n; 3], self.format, self.noise, self.seed, |p| {
+            self.signal(self.to_unit(p[0]), self.to_unit(p[1]), self.to_unit(p[2]))
+        })
+    }
+}
+
+/// Any phantom, as named in scenes (`kind = "sphere"`) and on the command line.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+#[serde(tag = "kind", rename_all = "kebab-case")]
+pub enum PhantomSpec {
+    Sphere(SphereSpec),
+    MarschnerLobb(MarschnerLobbSpec),
+}
+
+impl PhantomSpec {
+    pub fn build(&self) -> Result<Volume, PhantomError> {
+        match self {
+            PhantomSpec::Sphere(s) => s.build(),
+            PhantomSpec::MarschnerLobb(m) => m.build(),
+        }
+    }
+
+    pub fn format(&self) -> PhantomFormat {
+        match self {
+            PhantomSpec::Sphere(s) => s.format,
+            PhantomSpec::MarschnerLobb(m) => m.format,
+        }
+    }
+}
+
+fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
+    ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt()
+}
+
+/// Samples `value` (0..1) on a grid, scales to the format, adds noise, encodes.
+fn build_grid(
+    dims: [usize; 3],
+    format: PhantomFormat,
+    noise: f64,
+    seed: u64,
+    value: impl Fn([f64; 3]) -> f64 + Sync,
+) -> Result<Volume, PhantomError> {
+    let [nx, ny, nz] = dims;
+    let scale = format.full_scale();
+    let mut samples = vec![0.0f32; nx * ny * nz];
+    samples
+        .par_chunks_mut(nx * ny)
+        .enumerate()
+        .for_each(|(z, slab)| {
+            for y in 0..ny {
+                for x in 0..nx {
+                    let i = x + nx * (y + ny * z);
+                    let mut v = value([x as f64, y as f64, z as f64]) * scale;
+                    if noise > 0.0 {
+                        v += noise * gaussian(seed, i as u64);
+                    }
+                    slab[x + nx * y] = format.encode(v);
+                }
+            }
+        });
+    Volume::new(dims, [1.0; 3], format.sample_type(), samples)
+        .map_err(|e| PhantomError::Invalid(e.to_string()))
+}
+
+/// SplitMix64 finaliser: a good 64-bit mix of a counter.
+#[inline]
+pub fn mix64(mut z: u64) -> u64 {
+    z = z.wrapping_add(0x9e37_79b9_7f4a_7c15);
+    z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+    z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+    z ^ (z >> 31)
+}
+
+/// Uniform in (0, 1) from a counter.
+#[inline]
+pub fn uniform(seed: u64, counter: u64) -> f64 {
+    let bits = mix64(seed ^ mix64(counter)) >> 11;
+    (bits as f64 + 0.5) / (1u64 << 53) as f64
+}
+
+/// Standard normal from a counter (Box–Muller on two counter-based uniforms).
+pub fn gaussian(seed: u64, index: u64) -> f64 {
+    let u1 = uniform(seed, 2 * index);
+    let u2 = uniform(seed, 2 * index + 1);
+    (-2.0 * u1.ln()).sqrt() * (2.0 * std::f64::consts::PI * u2).cos()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sphere_profile_and_iso_radius() {
+        let s = SphereSpec {
+            size: 32,
+            radius: 8.0,
+            sigma: 2.0,
+            ..Default::default()
+        };
+        let v = s.build().unwrap();
+        assert_eq!(v.dims(), [32; 3]);
+        // The centre (15.5) is between samples; (15,15,15) is inside radius 8.
+        assert_eq!(v.get(15, 15, 15), 1.0);
+        let r = fringe_radius(8.0, 2.0, 0.5).unwrap();
+        assert!((fringe(r, 8.0, 2.0) - 0.5).abs() < 1e-12);
+        assert!(fringe_radius(8.0, 2.0, 0.0).is_none());
+    }
+
+    #[test]
+    fn holes_and_formats() {
+        let s = SphereSpec {
+            size: 40,
+            radius: 15.0,
+            sigma: 1.5,
+            holes: vec![Hole {
+                center: [19.5, 19.5, 19.5],
+                radius: 4.0,
+                sigma: 1.0,
+            }],
+            format: PhantomFormat::U8,
+            ..Default::default()
+        };
+        let v = s.build().unwrap();
+        assert_eq!(v.native_type(), SampleType::U8);
+        assert_eq!(v.get(19, 19, 19), 0.0, "hole centre is air");
+        assert_eq!(v.get(19, 19, 30), 255.0, "ball body is full");
+        assert_eq!(v.get(0, 0, 0), 0.0);
+    }
+
+    #[test]
+    fn noise_is_seeded_and_centred() {
+        let mk = |seed| {
+            SphereSpec {
+                size: 16,
+                noise: 0.1,
+                seed,
+                radius: 100.0,
+                ..Default::default()
+            }
+            .build()
+            .unwrap()
+        };
+        let (a, b, c) = (mk(7), mk(7), mk(8));
+        assert_eq!(a.samples(), b.samples());
+        assert_ne!(a.samples(), c.samples());
+        let mean: f64 = a.samples().iter().map(|&v| v as f64 - 1.0).sum::<f64>() / a.len() as f64;
+        let var: f64 = a
+            .samples()
+            .iter()
+            .map(|&v| (v as f64 - 1.0).powi(2))
+            .sum::<f64>()
+            / a.len() as f64;
+        assert!(mean.abs() < 0.01, "{mean}");
+        assert!((var.sqrt() - 0.1).abs() < 0.01, "{}", var.sqrt());
+    }
+
+    #[test]
+    fn marschner_lobb_matches_definition() {
+        let m = MarschnerLobbSpec::default();
+        let v = m.build().unwrap();
+        assert_eq!(v.dims(), [41; 3]);
+        // At the grid centre (0,0,0): (1 - 0 + α(1 + cos(2π·6·1)))/(2(1+α)) = (1+2α)/(2+2α).
+        let c = v.get(20, 20, 20) as f64;
+        assert!((c - 1.5 / 2.5).abs() < 1e-6, "{c}");
+        let (lo, hi) = v
+            .samples()
+            .iter()
+            .fold((f32::MAX, f32::MIN), |(l, h), &x| (l.min(x), h.max(x)));
+        assert!(lo >= 0.0 && hi <= 1.0);
+    }
+
+    #[test]
+    fn specs_deserialize_from_toml() {
+        let s: PhantomSpec = toml::from_str(
+            "kind = 'sphere'\nsize = 64\nradius = 20.0\nsigma = 3.0\nformat = 'u8'\n[[holes]]\ncenter = [30.0, 30.0, 30.0]\nradius = 5.0\nsigma = 1.0\n",
+        )
+        .unwrap();
+        match s {
+            PhantomSpec::Sphere(s) => {
+                assert_eq!(s.format, PhantomFormat::U8);
+                assert_eq!(s.holes.len(), 1);
+            }
+            _ => panic!(),
+        }
+        let m: PhantomSpec = toml::from_str("kind = 'marschner-lobb'\n").unwrap();
+        assert_eq!(m, PhantomSpec::MarschnerLobb(MarschnerLobbSpec::default()));
+        assert!(toml::from_str::<PhantomSpec>("kind = 'sphere'\nradus = 3.0\n").is_err());
+    }
+}

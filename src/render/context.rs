@@ -1,0 +1,105 @@
+//! What every stage reads: the scene, the prepared field and the constants
+//! derived from them once per frame.
+
+use glam::DVec3;
+
+use crate::classify::CellBound;
+use crate::filter::Field;
+use crate::lattice::Lattice;
+use crate::roots::bernstein::BernsteinBasis;
+use crate::scene::{RenderSettings, Scene, Traversal};
+
+/// How the traversal decides which cells to skip.
+pub enum Skip<'a> {
+    /// A bound from the cell's coefficients, computed per visited cell.
+    Bound(CellBound),
+    /// Placeholder for precomputed structures (classification tags, octree).
+    #[allow(dead_code)]
+    Prepared(&'a ()),
+}
+
+/// Shared, read-only state of one frame.
+pub struct Ctx<'a> {
+    pub scene: &'a Scene,
+    pub field: &'a Field,
+    pub iso: f64,
+    pub lattice: Lattice,
+    pub spacing: DVec3,
+    pub inv_spacing: DVec3,
+    /// World-space upper corner of the domain (lower corner is the origin).
+    pub box_max: DVec3,
+    pub basis: BernsteinBasis,
+    pub skip: Skip<'a>,
+    pub settings: RenderSettings,
+    /// Indices of refraction inside and outside the object.
+    pub ior_inside: f64,
+    pub ior_outside: f64,
+}
+
+impl<'a> Ctx<'a> {
+    pub fn new(scene: &'a Scene, field: &'a Field, spacing: [f64; 3]) -> Ctx<'a> {
+        let kernel = field.kernel();
+        let lattice = Lattice::new(kernel, field.dims());
+        let spacing = DVec3::from_array(spacing);
+        let n = field.dims();
+        let box_max = DVec3::new(
+            (n[0] - 1) as f64 * spacing.x,
+            (n[1] - 1) as f64 * spacing.y,
+            (n[2] - 1) as f64 * spacing.z,
+        );
+        Ctx {
+            scene,
+            field,
+            iso: scene.surface.iso,
+            lattice,
+            spacing,
+            inv_spacing: DVec3::ONE / spacing,
+            box_max,
+            basis: BernsteinBasis::new(3 * (kernel.support() - 1)),
+            skip: Skip::Bound(CellBound::new(kernel)),
+            settings: scene.render,
+            ior_inside: scene.surface.ior,
+            ior_outside: scene.surface.outside_ior,
+        }
+    }
+
+    pub fn traversal(&self) -> Traversal {
+        self.settings.traversal
+    }
+
+    /// Parameter interval `[t0, t1]` (with `t0 >= t_min`) where the ray is
+    /// inside the domain box, if any. Slab test with explicit handling of
+    /// directions parallel to a face.
+    #[inline]
+    pub fn clip(&self, o: DVec3, d: DVec3, t_min: f64) -> Option<(f64, f64)> {
+        let mut t0 = t_min;
+        let mut t1 = f64::INFINITY;
+        for a in 0..3 {
+            let (lo, hi) = (0.0, self.box_max[a]);
+            if d[a] == 0.0 {
+                if o[a] < lo || o[a] > hi {
+                    return None;
+                }
+                continue;
+            }
+            let inv = 1.0 / d[a];
+            let (mut ta, mut tb) = ((lo - o[a]) * inv, (hi - o[a]) * inv);
+            if ta > tb {
+                std::mem::swap(&mut ta, &mut tb);
+            }
+            t0 = t0.max(ta);
+            t1 = t1.min(tb);
+        }
+        if t0 <= t1 && t1.is_finite() {
+            Some((t0, t1))
+        } else {
+            None
+        }
+    }
+
+    /// World point → grid coordinates.
+    #[inline(always)]
+    pub fn to_grid(&self, p: DVec3) -> DVec3 {
+        p * self.inv_spacing
+    }
+}

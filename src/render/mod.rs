@@ -1,0 +1,103 @@
+//! The renderer: rays as structure-of-arrays packets per tile, moved through
+//! staged queues (see [`stages`]), tiles in parallel.
+//!
+//! ```text
+//! for each tile (in parallel):
+//!     generate → entry → { traverse → solve → refract }* → record
+//! film ← tiles (in tile order)
+//! ```
+//!
+//! Determinism: every pixel's value is computed by the same arithmetic on the
+//! same inputs whichever thread runs its tile, counters are integer sums, and
+//! tiles are assembled in a fixed order, so the output is the same bits for
+//! any thread count.
+
+pub mod context;
+pub mod packet;
+pub mod stages;
+pub mod stats;
+pub mod tile;
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
+
+use bumpalo::Bump;
+use rayon::prelude::*;
+
+pub use context::Ctx;
+pub use stats::{Counters, PrepareTimes, RenderStats};
+
+use crate::film::Film;
+use crate::filter::{Field, FilterKind};
+use crate::scene::Scene;
+use crate::volume::Volume;
+use crate::with_support;
+
+/// What a frame needs that does not depend on camera, backdrop or ior: the
+/// volume and its prefiltered field. Built once, reused across frames.
+pub struct Prepared {
+    pub volume: Arc<Volume>,
+    pub field: Arc<Field>,
+    pub times: PrepareTimes,
+}
+
+impl Prepared {
+    /// Prefilters `volume` for `filter` (timed).
+    pub fn new(volume: Arc<Volume>, filter: FilterKind) -> Prepared {
+        let start = Instant::now();
+        let field = Arc::new(Field::new(&volume, filter));
+        Prepared {
+            volume,
+            field,
+            times: PrepareTimes {
+                prefilter_s: start.elapsed().as_secs_f64(),
+                ..Default::default()
+            },
+        }
+    }
+}
+
+/// A rendered frame and how it was made.
+pub struct Frame {
+    pub film: Film,
+    pub stats: RenderStats,
+}
+
+/// Renders `scene` with `prep` on the current rayon pool. `progress`, when
+/// given, counts finished tiles (for a progress bar).
+pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) -> Frame {
+    let ctx = Ctx::new(scene, &prep.field, prep.volume.spacing());
+    let tiles = tile::tiles(scene.width, scene.height, scene.render.tile);
+    let start = Instant::now();
+    let outs: Vec<tile::TileOut> = tiles
+        .par_iter()
+        .map_init(Bump::new, |bump, &t| {
+            bump.reset();
+            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S>(&ctx, t, bump));
+            if let Some(p) = progress {
+                p.fetch_add(1, Ordering::Relaxed);
+            }
+            out
+        })
+        .collect();
+    let film_start = Instant::now();
+    let mut film = Film::new(scene.width, scene.height);
+    let mut stats = RenderStats {
+        threads: rayon::current_num_threads(),
+        width: scene.width,
+        height: scene.height,
+        prepare: prep.times,
+        ..Default::default()
+    };
+    for o in &outs {
+        film.blit(o);
+        stats.counters.add(&o.counters);
+        stats.stage_times.merge(&o.times);
+    }
+    stats
+        .stage_times
+        .add(stats::Stage::Film, film_start.elapsed());
+    stats.wall = start.elapsed();
+    Frame { film, stats }
+}

@@ -1,0 +1,149 @@
+//! Rays of one tile as structure-of-arrays, and the work queues between stages.
+//!
+//! All storage lives in the tile's `bumpalo` arena, reset per tile, so a frame
+//! allocates nothing per ray. Stages address rays by index through queues
+//! (`Queue`), so a ray's data never moves while it hops between stages.
+
+use bumpalo::Bump;
+use bumpalo::collections::Vec as BVec;
+use glam::DVec3;
+
+/// A queue of ray indices feeding one stage.
+pub type Queue<'a> = BVec<'a, u32>;
+
+/// How a ray ended, read by the record stage.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fate {
+    /// Still travelling through the pipeline.
+    Active,
+    /// Left the volume (or never entered it): continues straight to the backdrop.
+    Escaped,
+    /// Stopped after `max_events` interface events: no backdrop hit.
+    Terminated,
+}
+
+/// The rays of a tile, one entry per ray in every array.
+pub struct Rays<'a> {
+    /// Image pixel index `y * width + x`.
+    pub pixel: BVec<'a, u32>,
+    /// Weight of this ray's colour in its pixel.
+    pub weight: BVec<'a, f32>,
+    /// True for the pixel-centre ray, which writes the hit-position image.
+    pub centre: BVec<'a, bool>,
+    /// World-space origin and unit direction of the current straight piece.
+    pub org: [BVec<'a, f64>; 3],
+    pub dir: [BVec<'a, f64>; 3],
+    /// Current ray parameter (world units along `dir` from `org`).
+    pub t: BVec<'a, f64>,
+    /// Where the current piece leaves the volume's bounds.
+    pub t_end: BVec<'a, f64>,
+    /// End of the segment handed to the solve stage.
+    pub seg_end: BVec<'a, f64>,
+    /// Field minus iso at `t` and `seg_end` (step traversal's bracket).
+    pub seg_g: [BVec<'a, f64>; 2],
+    /// Current knot cell (cell traversal).
+    pub cell: [BVec<'a, i32>; 3],
+    /// The traversal must first step past `cell` (its solve found nothing).
+    pub advance: BVec<'a, bool>,
+    /// Medium: inside the object (`f > iso`).
+    pub inside: BVec<'a, bool>,
+    pub events: BVec<'a, u32>,
+    pub fate: BVec<'a, Fate>,
+}
+
+impl<'a> Rays<'a> {
+    pub fn with_capacity_in(n: usize, bump: &'a Bump) -> Rays<'a> {
+        let f = || BVec::with_capacity_in(n, bump);
+        Rays {
+            pixel: BVec::with_capacity_in(n, bump),
+            weight: BVec::with_capacity_in(n, bump),
+            centre: BVec::with_capacity_in(n, bump),
+            org: [f(), f(), f()],
+            dir: [f(), f(), f()],
+            t: f(),
+            t_end: f(),
+            seg_end: f(),
+            seg_g: [f(), f()],
+            cell: [
+                BVec::with_capacity_in(n, bump),
+                BVec::with_capacity_in(n, bump),
+                BVec::with_capacity_in(n, bump),
+            ],
+            advance: BVec::with_capacity_in(n, bump),
+            inside: BVec::with_capacity_in(n, bump),
+            events: BVec::with_capacity_in(n, bump),
+            fate: BVec::with_capacity_in(n, bump),
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.pixel.len()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.pixel.is_empty()
+    }
+
+    /// Appends a fresh ray; returns its index.
+    pub fn push(&mut self, pixel: u32, weight: f32, centre: bool, org: DVec3, dir: DVec3) -> u32 {
+        let i = self.len() as u32;
+        self.pixel.push(pixel);
+        self.weight.push(weight);
+        self.centre.push(centre);
+        for a in 0..3 {
+            self.org[a].push(org[a]);
+            self.dir[a].push(dir[a]);
+            self.cell[a].push(0);
+        }
+        self.t.push(0.0);
+        self.t_end.push(0.0);
+        self.seg_end.push(0.0);
+        self.seg_g[0].push(0.0);
+        self.seg_g[1].push(0.0);
+        self.advance.push(false);
+        self.inside.push(false);
+        self.events.push(0);
+        self.fate.push(Fate::Active);
+        i
+    }
+
+    #[inline(always)]
+    pub fn origin(&self, i: usize) -> DVec3 {
+        DVec3::new(self.org[0][i], self.org[1][i], self.org[2][i])
+    }
+
+    #[inline(always)]
+    pub fn direction(&self, i: usize) -> DVec3 {
+        DVec3::new(self.dir[0][i], self.dir[1][i], self.dir[2][i])
+    }
+
+    #[inline(always)]
+    pub fn set_origin(&mut self, i: usize, o: DVec3) {
+        for a in 0..3 {
+            self.org[a][i] = o[a];
+        }
+    }
+
+    #[inline(always)]
+    pub fn set_direction(&mut self, i: usize, d: DVec3) {
+        for a in 0..3 {
+            self.dir[a][i] = d[a];
+        }
+    }
+
+    #[inline(always)]
+    pub fn cell_of(&self, i: usize) -> [i64; 3] {
+        [
+            self.cell[0][i] as i64,
+            self.cell[1][i] as i64,
+            self.cell[2][i] as i64,
+        ]
+    }
+
+    #[inline(always)]
+    pub fn set_cell(&mut self, i: usize, c: [i64; 3]) {
+        for a in 0..3 {
+            self.cell[a][i] = c[a] as i32;
+        }
+    }
+}

@@ -1,0 +1,42 @@
+//! Stage 2: clip rays against the domain box; rays that miss go straight to
+//! the record stage, the others start traversal in the medium the field says
+//! they are in.
+
+use super::super::context::Ctx;
+use super::super::packet::{Fate, Queue, Rays};
+use super::{field_minus_iso, place};
+use crate::render::stats::Counters;
+use crate::roots::inside;
+
+pub fn entry<const S: usize>(
+    ctx: &Ctx,
+    rays: &mut Rays,
+    input: &[u32],
+    traverse: &mut Queue,
+    record: &mut Queue,
+    c: &mut Counters,
+) {
+    for &r in input {
+        let i = r as usize;
+        c.rays += 1;
+        let (o, d) = (rays.origin(i), rays.direction(i));
+        let span = if ctx.lattice.is_solid() {
+            ctx.clip(o, d, 0.0)
+        } else {
+            None
+        };
+        match span {
+            None => {
+                rays.fate[i] = Fate::Escaped;
+                record.push(r);
+            }
+            Some((t0, t1)) => {
+                c.rays_entering += 1;
+                let g = field_minus_iso::<S>(ctx, ctx.to_grid(o + t0 * d), c);
+                rays.inside[i] = inside(g);
+                place::<S>(ctx, rays, i, t0, t1, c);
+                traverse.push(r);
+            }
+        }
+    }
+}

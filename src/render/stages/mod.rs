@@ -1,0 +1,66 @@
+//! The pipeline's stages. Each one drains an input queue of ray indices and
+//! pushes every ray into exactly one output queue:
+//!
+//! ```text
+//! generate ─▶ entry ─┬─▶ traverse ─┬─▶ solve ─┬─▶ refract ─┬─▶ traverse
+//!                    │             │          └─▶ traverse  └─▶ record (max events)
+//!                    │             └─▶ record (left the volume)
+//!                    └─▶ record (missed the volume)
+//! ```
+//!
+//! Stages that touch the field are generic over the kernel support `S`, so
+//! their inner loops are compiled per filter.
+
+pub mod entry;
+pub mod generate;
+pub mod record;
+pub mod refract;
+pub mod solve;
+pub mod traverse;
+
+use glam::DVec3;
+
+use super::context::Ctx;
+use super::packet::Rays;
+use crate::render::stats::Counters;
+use crate::scene::Traversal;
+
+/// Positions ray `i` at parameter `t` of its current piece (which must lie in
+/// the domain box up to `t_end`): sets its cell, and for step traversal the
+/// field value there (the start of the next bracket).
+#[inline]
+pub(crate) fn place<const S: usize>(
+    ctx: &Ctx,
+    rays: &mut Rays,
+    i: usize,
+    t: f64,
+    t_end: f64,
+    c: &mut Counters,
+) {
+    let p = ctx.to_grid(rays.origin(i) + t * rays.direction(i));
+    rays.t[i] = t;
+    rays.t_end[i] = t_end;
+    rays.advance[i] = false;
+    let cell = [
+        ctx.lattice.cell_of(0, p.x),
+        ctx.lattice.cell_of(1, p.y),
+        ctx.lattice.cell_of(2, p.z),
+    ];
+    rays.set_cell(i, cell);
+    if ctx.traversal() == Traversal::Step {
+        rays.seg_g[0][i] = field_minus_iso::<S>(ctx, p, c);
+    }
+}
+
+/// `f(p) - iso` at a grid point, clamped into the domain.
+#[inline]
+pub(crate) fn field_minus_iso<const S: usize>(ctx: &Ctx, p: DVec3, c: &mut Counters) -> f64 {
+    c.kernel_evals += 1;
+    let hi = ctx.field.dims().map(|n| (n - 1) as f64);
+    let q = [
+        p.x.clamp(0.0, hi[0]),
+        p.y.clamp(0.0, hi[1]),
+        p.z.clamp(0.0, hi[2]),
+    ];
+    ctx.field.value_in::<S>(q) - ctx.iso
+}

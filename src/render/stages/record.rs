@@ -1,0 +1,50 @@
+//! Stage 6: rays that left the volume travel straight to the backdrop; record
+//! where they land (the hit-position image) and what colour they see.
+
+use super::super::context::Ctx;
+use super::super::packet::{Fate, Rays};
+use super::super::tile::TileOut;
+use crate::render::stats::Counters;
+
+pub fn record(ctx: &Ctx, rays: &Rays, input: &[u32], out: &mut TileOut, c: &mut Counters) {
+    let width = ctx.scene.width;
+    for &r in input {
+        let i = r as usize;
+        let (o, d) = (rays.origin(i), rays.direction(i));
+        let hit = match rays.fate[i] {
+            Fate::Escaped => {
+                if !(o.is_finite() && d.is_finite()) {
+                    c.undefined += 1;
+                    None
+                } else {
+                    let h = ctx.scene.backdrop.hit(o, d);
+                    if h.is_none() {
+                        c.missed_backdrop += 1;
+                    }
+                    h
+                }
+            }
+            Fate::Terminated => None,
+            Fate::Active => {
+                c.undefined += 1;
+                None
+            }
+        };
+        let color = match hit {
+            Some((u, v)) => ctx.scene.backdrop.color(u, v),
+            None => ctx.scene.background,
+        };
+        let px = rays.pixel[i];
+        let local = out.local_index(px % width, px / width);
+        let w = rays.weight[i];
+        for k in 0..3 {
+            out.color[local][k] += w * color[k];
+        }
+        if rays.centre[i] {
+            let (u, v) = hit.unwrap_or((f64::NAN, f64::NAN));
+            out.u[local] = u as f32;
+            out.v[local] = v as f32;
+            out.events[local] = rays.events[i] as f32;
+        }
+    }
+}

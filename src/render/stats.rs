@@ -1,0 +1,223 @@
+//! Work counters and per-stage times: the profile users read after a render.
+//!
+//! Counters are integers summed over tiles, so they are identical for any
+//! thread count; times are wall-clock sums over tiles (CPU time spent in each
+//! stage, across threads).
+
+use std::time::Duration;
+
+use serde::Serialize;
+
+/// The pipeline's stages, in order.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    Generate = 0,
+    Entry = 1,
+    Traverse = 2,
+    Solve = 3,
+    Refract = 4,
+    Record = 5,
+    Film = 6,
+}
+
+pub const STAGES: [Stage; 7] = [
+    Stage::Generate,
+    Stage::Entry,
+    Stage::Traverse,
+    Stage::Solve,
+    Stage::Refract,
+    Stage::Record,
+    Stage::Film,
+];
+
+impl Stage {
+    pub fn name(self) -> &'static str {
+        match self {
+            Stage::Generate => "generate",
+            Stage::Entry => "entry",
+            Stage::Traverse => "traverse",
+            Stage::Solve => "solve",
+            Stage::Refract => "refract",
+            Stage::Record => "record",
+            Stage::Film => "film",
+        }
+    }
+}
+
+/// Counters of the work a render did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
+pub struct Counters {
+    /// Rays traced (primary rays, all samples).
+    pub rays: u64,
+    /// Rays whose path entered the volume's bounds.
+    pub rays_entering: u64,
+    /// Cells (or octree nodes) the traversal examined.
+    pub cells_visited: u64,
+    /// Cells whose crossing problem was solved (restriction built and isolated).
+    pub cells_solved: u64,
+    /// Solved cells that held the crossing the ray took.
+    pub cells_with_crossing: u64,
+    /// Point evaluations of the field (value or value+gradient).
+    pub kernel_evals: u64,
+    /// Brent iterations over all solves.
+    pub brent_iters: u64,
+    /// Bernstein intervals examined during isolation.
+    pub isolation_intervals: u64,
+    /// Refractions.
+    pub refractions: u64,
+    /// Total internal reflections.
+    pub reflections: u64,
+    /// Crossings where the gradient vanished (ray continued straight).
+    pub degenerate_normals: u64,
+    /// Rays stopped by `max_events` (no backdrop hit).
+    pub terminated: u64,
+    /// Rays that left towards no backdrop (parallel or pointing away).
+    pub missed_backdrop: u64,
+    /// Rays that ended in an undefined state (NaN or infinite values). Must be 0.
+    pub undefined: u64,
+}
+
+impl Counters {
+    pub fn add(&mut self, o: &Counters) {
+        self.rays += o.rays;
+        self.rays_entering += o.rays_entering;
+        self.cells_visited += o.cells_visited;
+        self.cells_solved += o.cells_solved;
+        self.cells_with_crossing += o.cells_with_crossing;
+        self.kernel_evals += o.kernel_evals;
+        self.brent_iters += o.brent_iters;
+        self.isolation_intervals += o.isolation_intervals;
+        self.refractions += o.refractions;
+        self.reflections += o.reflections;
+        self.degenerate_normals += o.degenerate_normals;
+        self.terminated += o.terminated;
+        self.missed_backdrop += o.missed_backdrop;
+        self.undefined += o.undefined;
+    }
+}
+
+/// Time spent per stage.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct StageTimes(pub [Duration; 7]);
+
+impl StageTimes {
+    #[inline]
+    pub fn add(&mut self, stage: Stage, d: Duration) {
+        self.0[stage as usize] += d;
+    }
+    pub fn merge(&mut self, o: &StageTimes) {
+        for (a, b) in self.0.iter_mut().zip(o.0.iter()) {
+            *a += *b;
+        }
+    }
+    pub fn get(&self, stage: Stage) -> Duration {
+        self.0[stage as usize]
+    }
+    pub fn total(&self) -> Duration {
+        self.0.iter().sum()
+    }
+}
+
+/// Everything measured about one render.
+#[derive(Clone, Debug, Default)]
+pub struct RenderStats {
+    pub counters: Counters,
+    pub stage_times: StageTimes,
+    /// Wall time of the tile loop.
+    pub wall: Duration,
+    /// One-time preparation (prefilter, classification, octree), if done now.
+    pub prepare: PrepareTimes,
+    pub threads: usize,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Build times of the structures a scene needs (zero when cached).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize)]
+pub struct PrepareTimes {
+    pub load_s: f64,
+    pub prefilter_s: f64,
+    pub classify_s: f64,
+    pub octree_s: f64,
+}
+
+impl RenderStats {
+    /// A JSON object with every counter, per-ray ratios and stage times.
+    pub fn to_json(&self) -> serde_json::Value {
+        let c = &self.counters;
+        let rays = c.rays.max(1) as f64;
+        let mut stages = serde_json::Map::new();
+        for s in STAGES {
+            stages.insert(
+                s.name().into(),
+                serde_json::json!(self.stage_times.get(s).as_secs_f64()),
+            );
+        }
+        serde_json::json!({
+            "width": self.width,
+            "height": self.height,
+            "threads": self.threads,
+            "wall_s": self.wall.as_secs_f64(),
+            "rays_per_s": c.rays as f64 / self.wall.as_secs_f64().max(1e-12),
+            "counters": c,
+            "per_ray": {
+                "cells_visited": c.cells_visited as f64 / rays,
+                "cells_solved": c.cells_solved as f64 / rays,
+                "kernel_evals": c.kernel_evals as f64 / rays,
+                "brent_iters": c.brent_iters as f64 / rays,
+            },
+            "solve_efficiency": c.cells_with_crossing as f64 / c.cells_solved.max(1) as f64,
+            "stage_cpu_s": stages,
+            "prepare": self.prepare,
+        })
+    }
+
+    /// A short human-readable table.
+    pub fn table(&self) -> String {
+        let c = &self.counters;
+        let rays = c.rays.max(1) as f64;
+        let total = self.stage_times.total().as_secs_f64().max(1e-12);
+        let mut s = String::new();
+        s.push_str(&format!(
+            "{}x{} in {:.1} ms wall ({} threads), {:.2} Mrays/s\n",
+            self.width,
+            self.height,
+            self.wall.as_secs_f64() * 1e3,
+            self.threads,
+            c.rays as f64 / self.wall.as_secs_f64().max(1e-12) / 1e6
+        ));
+        let p = &self.prepare;
+        if p.load_s + p.prefilter_s + p.classify_s + p.octree_s > 0.0 {
+            s.push_str(&format!(
+                "prepare: load {:.1} ms, prefilter {:.1} ms, classify {:.1} ms, octree {:.1} ms\n",
+                p.load_s * 1e3,
+                p.prefilter_s * 1e3,
+                p.classify_s * 1e3,
+                p.octree_s * 1e3
+            ));
+        }
+        s.push_str("stage      cpu ms   share\n");
+        for st in STAGES {
+            let t = self.stage_times.get(st).as_secs_f64();
+            s.push_str(&format!(
+                "{:9} {:8.2} {:6.1}%\n",
+                st.name(),
+                t * 1e3,
+                100.0 * t / total
+            ));
+        }
+        s.push_str(&format!(
+            "per ray: {:.2} cells visited, {:.2} solved ({:.0}% held a crossing), {:.2} kernel evals, {:.2} Brent iterations\n",
+            c.cells_visited as f64 / rays,
+            c.cells_solved as f64 / rays,
+            100.0 * c.cells_with_crossing as f64 / c.cells_solved.max(1) as f64,
+            c.kernel_evals as f64 / rays,
+            c.brent_iters as f64 / rays,
+        ));
+        s.push_str(&format!(
+            "events: {} refractions, {} total internal reflections, {} degenerate normals; {} rays stopped by max_events, {} missed the backdrop, {} undefined\n",
+            c.refractions, c.reflections, c.degenerate_normals, c.terminated, c.missed_backdrop, c.undefined
+        ));
+        s
+    }
+}

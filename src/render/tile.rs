@@ -1,0 +1,173 @@
+//! One tile through the pipeline: the render loop, reading like the algorithm.
+
+use std::time::Instant;
+
+use bumpalo::Bump;
+use bumpalo::collections::Vec as BVec;
+
+use super::context::Ctx;
+use super::packet::Rays;
+use super::stages::{entry, generate, record, refract, solve, traverse};
+use super::stats::{Counters, Stage, StageTimes};
+
+/// A rectangle of pixels `[x0, x1) × [y0, y1)`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Tile {
+    pub x0: u32,
+    pub y0: u32,
+    pub x1: u32,
+    pub y1: u32,
+}
+
+impl Tile {
+    pub fn width(&self) -> u32 {
+        self.x1 - self.x0
+    }
+    pub fn height(&self) -> u32 {
+        self.y1 - self.y0
+    }
+    pub fn pixels(&self) -> usize {
+        (self.width() * self.height()) as usize
+    }
+}
+
+/// Row-major tiles of `size` covering a `width × height` image.
+pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
+    let mut out = Vec::new();
+    for y0 in (0..height).step_by(size as usize) {
+        for x0 in (0..width).step_by(size as usize) {
+            out.push(Tile {
+                x0,
+                y0,
+                x1: (x0 + size).min(width),
+                y1: (y0 + size).min(height),
+            });
+        }
+    }
+    out
+}
+
+/// What a tile produces: its part of the film.
+#[derive(Clone, Debug)]
+pub struct TileOut {
+    pub tile: Tile,
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub events: Vec<f32>,
+    pub color: Vec<[f32; 3]>,
+    pub counters: Counters,
+    pub times: StageTimes,
+}
+
+impl TileOut {
+    fn new(tile: Tile) -> TileOut {
+        let n = tile.pixels();
+        TileOut {
+            tile,
+            u: vec![f32::NAN; n],
+            v: vec![f32::NAN; n],
+            events: vec![0.0; n],
+            color: vec![[0.0; 3]; n],
+            counters: Counters::default(),
+            times: StageTimes::default(),
+        }
+    }
+
+    #[inline]
+    pub fn local_index(&self, px: u32, py: u32) -> usize {
+        ((py - self.tile.y0) * self.tile.width() + (px - self.tile.x0)) as usize
+    }
+}
+
+/// Runs one stage and charges its time.
+macro_rules! stage {
+    ($times:expr, $stage:expr, $call:expr) => {{
+        let start = Instant::now();
+        let r = $call;
+        $times.add($stage, start.elapsed());
+        r
+    }};
+}
+
+/// Traces every ray of `tile`. Scratch comes from `bump`, which the caller
+/// resets between tiles.
+pub fn render_tile<const S: usize>(ctx: &Ctx, tile: Tile, bump: &Bump) -> TileOut {
+    let mut out = TileOut::new(tile);
+    let mut counters = Counters::default();
+    let mut times = StageTimes::default();
+    let c = &mut counters;
+    let n = tile.pixels();
+    let mut rays = Rays::with_capacity_in(n, bump);
+    let mut primary = BVec::with_capacity_in(n, bump);
+    let mut traverse_q = BVec::with_capacity_in(n, bump);
+    let mut solve_q = BVec::with_capacity_in(n, bump);
+    let mut refract_q = BVec::with_capacity_in(n, bump);
+    let mut record_q = BVec::with_capacity_in(n, bump);
+
+    stage!(
+        times,
+        Stage::Generate,
+        generate::generate(ctx, &tile, &mut rays, &mut primary)
+    );
+    stage!(
+        times,
+        Stage::Entry,
+        entry::entry::<S>(ctx, &mut rays, &primary, &mut traverse_q, &mut record_q, c)
+    );
+    while !traverse_q.is_empty() {
+        stage!(
+            times,
+            Stage::Traverse,
+            traverse::traverse::<S>(ctx, &mut rays, &traverse_q, &mut solve_q, &mut record_q, c)
+        );
+        traverse_q.clear();
+        stage!(
+            times,
+            Stage::Solve,
+            solve::solve::<S>(ctx, &mut rays, &solve_q, &mut refract_q, &mut traverse_q, c)
+        );
+        solve_q.clear();
+        stage!(
+            times,
+            Stage::Refract,
+            refract::refract::<S>(
+                ctx,
+                &mut rays,
+                &refract_q,
+                &mut traverse_q,
+                &mut record_q,
+                c
+            )
+        );
+        refract_q.clear();
+    }
+    stage!(
+        times,
+        Stage::Record,
+        record::record(ctx, &rays, &record_q, &mut out, c)
+    );
+    out.counters = counters;
+    out.times = times;
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tiles_cover_the_image_once() {
+        let t = tiles(37, 20, 16);
+        assert_eq!(t.len(), 3 * 2);
+        assert_eq!(t.iter().map(|t| t.pixels()).sum::<usize>(), 37 * 20);
+        assert_eq!(
+            t[2],
+            Tile {
+                x0: 32,
+                y0: 0,
+                x1: 37,
+                y1: 16
+            }
+        );
+    }
+}

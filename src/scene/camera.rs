@@ -1,0 +1,184 @@
+//! Pinhole and orthographic cameras, exactly as SPEC.md defines them.
+
+use glam::DVec3;
+
+/// Projection model.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Projection {
+    /// `tan(fov_y / 2)`.
+    Perspective { tan_half_fov: f64 },
+    /// Half the view height in world units.
+    Orthographic { half_height: f64 },
+}
+
+/// A camera with its orthonormal frame and image size.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Camera {
+    pub position: DVec3,
+    /// `f = normalize(look_at - position)`.
+    pub forward: DVec3,
+    /// `r = normalize(cross(f, up))`.
+    pub right: DVec3,
+    /// `u = cross(r, f)`.
+    pub up: DVec3,
+    pub projection: Projection,
+    pub width: u32,
+    pub height: u32,
+}
+
+/// Why a camera cannot be built.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CameraError {
+    #[error("position and look_at coincide")]
+    NoDirection,
+    #[error("up is parallel to the viewing direction")]
+    UpParallel,
+    #[error("fov_y must be in (0, 180) degrees, got {0}")]
+    BadFov(f64),
+    #[error("orthographic height must be > 0, got {0}")]
+    BadHeight(f64),
+    #[error("camera vectors must be finite")]
+    NotFinite,
+}
+
+impl Camera {
+    pub fn new(
+        position: DVec3,
+        look_at: DVec3,
+        up: DVec3,
+        projection: Projection,
+        width: u32,
+        height: u32,
+    ) -> Result<Camera, CameraError> {
+        if !(position.is_finite() && look_at.is_finite() && up.is_finite()) {
+            return Err(CameraError::NotFinite);
+        }
+        let f = look_at - position;
+        if f.length() <= 1e-12 * (1.0 + position.length()) {
+            return Err(CameraError::NoDirection);
+        }
+        let f = f.normalize();
+        let r = f.cross(up);
+        if r.length() <= 1e-9 * up.length().max(1e-300) || up.length() == 0.0 {
+            return Err(CameraError::UpParallel);
+        }
+        let r = r.normalize();
+        let u = r.cross(f);
+        match projection {
+            Projection::Perspective { tan_half_fov } => {
+                if !(tan_half_fov.is_finite() && tan_half_fov > 0.0) {
+                    return Err(CameraError::BadFov(2.0 * tan_half_fov.atan().to_degrees()));
+                }
+            }
+            Projection::Orthographic { half_height } => {
+                if !(half_height.is_finite() && half_height > 0.0) {
+                    return Err(CameraError::BadHeight(2.0 * half_height));
+                }
+            }
+        }
+        Ok(Camera {
+            position,
+            forward: f,
+            right: r,
+            up: u,
+            projection,
+            width,
+            height,
+        })
+    }
+
+    /// Ray through continuous image position `(x, y)` (pixel `(px, py)` has its
+    /// centre at `(px + 0.5, py + 0.5)`; row 0 at the top). Returns origin and
+    /// unit direction.
+    #[inline]
+    pub fn ray(&self, x: f64, y: f64) -> (DVec3, DVec3) {
+        let (w, h) = (self.width as f64, self.height as f64);
+        let sx = 2.0 * x / w - 1.0;
+        let sy = 1.0 - 2.0 * y / h;
+        let aspect = w / h;
+        match self.projection {
+            Projection::Perspective { tan_half_fov: t } => {
+                let d = self.forward + sx * t * aspect * self.right + sy * t * self.up;
+                (self.position, d.normalize())
+            }
+            Projection::Orthographic { half_height } => {
+                let o = self.position
+                    + sx * half_height * aspect * self.right
+                    + sy * half_height * self.up;
+                (o, self.forward)
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spec_frame_and_centre_ray() {
+        let c = Camera::new(
+            DVec3::new(31.5, 31.5, -150.0),
+            DVec3::new(31.5, 31.5, 31.5),
+            DVec3::Y,
+            Projection::Perspective {
+                tan_half_fov: (10f64).to_radians().tan(),
+            },
+            512,
+            512,
+        )
+        .unwrap();
+        assert_eq!(c.right, DVec3::new(-1.0, 0.0, 0.0));
+        assert_eq!(c.up, DVec3::Y);
+        let (o, d) = c.ray(256.0, 256.0);
+        assert_eq!(o, c.position);
+        assert!((d - DVec3::Z).length() < 1e-15);
+        // Top-left pixel centre looks up and to the camera's right (-x).
+        let (_, d) = c.ray(0.5, 0.5);
+        assert!(d.y > 0.0 && d.x > 0.0);
+    }
+
+    #[test]
+    fn orthographic_offsets_origin() {
+        let c = Camera::new(
+            DVec3::ZERO,
+            DVec3::Z,
+            DVec3::Y,
+            Projection::Orthographic { half_height: 5.0 },
+            200,
+            100,
+        )
+        .unwrap();
+        let (o, d) = c.ray(200.0, 0.0);
+        assert_eq!(d, DVec3::Z);
+        assert!((o - DVec3::new(-10.0, 5.0, 0.0)).length() < 1e-12);
+    }
+
+    #[test]
+    fn degenerate_cameras_are_errors() {
+        let p = Projection::Perspective { tan_half_fov: 0.5 };
+        assert_eq!(
+            Camera::new(DVec3::ONE, DVec3::ONE, DVec3::Y, p, 4, 4),
+            Err(CameraError::NoDirection)
+        );
+        assert_eq!(
+            Camera::new(DVec3::ZERO, DVec3::Y, DVec3::Y, p, 4, 4),
+            Err(CameraError::UpParallel)
+        );
+        assert!(matches!(
+            Camera::new(
+                DVec3::ZERO,
+                DVec3::Z,
+                DVec3::Y,
+                Projection::Orthographic { half_height: 0.0 },
+                4,
+                4
+            ),
+            Err(CameraError::BadHeight(_))
+        ));
+        assert_eq!(
+            Camera::new(DVec3::NAN, DVec3::Z, DVec3::Y, p, 4, 4),
+            Err(CameraError::NotFinite)
+        );
+    }
+}

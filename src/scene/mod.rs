@@ -1,0 +1,848 @@
+//! Scene files: what to render, parsed from TOML into a validated [`Scene`].
+//!
+//! A scene names an image size, a camera, a volume (a file or a phantom), the
+//! refracting surface (filter, iso-value, indices of refraction), the backdrop
+//! and render settings. `--set section.key=value` overrides are applied to the
+//! parsed TOML table before validation, so an override is checked exactly like
+//! a value written in the file. Every error names the file and the key.
+
+pub mod backdrop;
+pub mod camera;
+
+use std::path::{Path, PathBuf};
+
+use glam::DVec3;
+use serde::Deserialize;
+
+pub use backdrop::{Backdrop, Pattern, Texture};
+pub use camera::{Camera, CameraError, Projection};
+
+use crate::filter::FilterKind;
+use crate::phantom::PhantomSpec;
+use crate::volume::{Endian, LoadOptions, RawSpec, SampleType, Volume, VolumeError};
+
+/// Largest image side accepted (and 2^28 pixels in all).
+pub const MAX_IMAGE_SIDE: u32 = 32768;
+const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+
+#[derive(Debug, thiserror::Error)]
+pub enum SceneError {
+    #[error("{path}: {source}")]
+    Io {
+        path: PathBuf,
+        #[source]
+        source: std::io::Error,
+    },
+    #[error("{path}: {msg}")]
+    Syntax { path: PathBuf, msg: String },
+    #[error("{path}: [{key}] {msg}")]
+    Key {
+        path: PathBuf,
+        key: String,
+        msg: String,
+    },
+    #[error("--set {arg}: {msg}")]
+    Override { arg: String, msg: String },
+    #[error(transparent)]
+    Volume(#[from] VolumeError),
+    #[error("{path}: phantom: {msg}")]
+    Phantom { path: PathBuf, msg: String },
+}
+
+// ---------------------------------------------------------------------------
+// The file format (what serde sees).
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct SceneFile {
+    image: ImageCfg,
+    camera: CameraCfg,
+    volume: VolumeCfg,
+    surface: SurfaceCfg,
+    backdrop: BackdropCfg,
+    #[serde(default)]
+    render: RenderCfg,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct ImageCfg {
+    width: u32,
+    height: u32,
+    /// Colour of rays that never reach the backdrop.
+    #[serde(default = "default_background")]
+    background: [f32; 3],
+}
+
+fn default_background() -> [f32; 3] {
+    [0.25, 0.35, 0.55]
+}
+
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default)]
+#[serde(rename_all = "lowercase")]
+enum CameraKind {
+    #[default]
+    Perspective,
+    Orthographic,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct CameraCfg {
+    #[serde(default)]
+    kind: CameraKind,
+    position: [f64; 3],
+    look_at: [f64; 3],
+    #[serde(default = "default_up")]
+    up: [f64; 3],
+    fov_y: Option<f64>,
+    height: Option<f64>,
+}
+
+fn default_up() -> [f64; 3] {
+    [0.0, 1.0, 0.0]
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct RawCfg {
+    dims: [usize; 3],
+    #[serde(rename = "type")]
+    sample_type: String,
+    #[serde(default = "default_endian")]
+    endian: String,
+    #[serde(default)]
+    offset: u64,
+}
+
+fn default_endian() -> String {
+    "little".into()
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct VolumeCfg {
+    path: Option<String>,
+    phantom: Option<PhantomSpec>,
+    raw: Option<RawCfg>,
+    /// Overrides the file's spacing.
+    spacing: Option<[f64; 3]>,
+    #[serde(default)]
+    allow_nan: bool,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct SurfaceCfg {
+    filter: String,
+    #[serde(default)]
+    lambda: f64,
+    iso: f64,
+    #[serde(default = "default_ior")]
+    ior: f64,
+    #[serde(default = "default_outside_ior")]
+    outside_ior: f64,
+}
+
+fn default_ior() -> f64 {
+    1.5
+}
+fn default_outside_ior() -> f64 {
+    1.0
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct BackdropCfg {
+    center: [f64; 3],
+    normal: [f64; 3],
+    u_axis: [f64; 3],
+    checker: Option<f64>,
+    /// `[even, odd]` square colours (default white, black).
+    checker_colors: Option<[[f32; 3]; 2]>,
+    image: Option<String>,
+    width: Option<f64>,
+    /// Colour beyond the photograph's edges.
+    outside: Option<[f32; 3]>,
+}
+
+/// Space traversal strategy (see `render::stages::traverse`).
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Traversal {
+    /// Fixed-step ray casting with Brent refinement: the paper's baseline.
+    Step,
+    /// 3-D DDA cell by cell, exact per-cell crossings.
+    #[default]
+    Dda,
+    /// Top-down octree over classified cells, DDA inside occupied leaves.
+    Octree,
+}
+
+/// Cell classification used to skip cells.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Classify {
+    /// No precomputation: a bound from the cell's coefficients, on the fly.
+    #[default]
+    None,
+    /// Binary morphological classification (Thévenaz & Unser 2003).
+    Bmcc,
+    /// Approximate continuous classification (the paper's equation 1).
+    Accc,
+}
+
+/// How many rays per pixel, and how their colours combine.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Supersampling {
+    #[default]
+    None,
+    Grid,
+    Jitter,
+    Prss,
+}
+
+#[derive(Deserialize, Debug)]
+#[serde(deny_unknown_fields)]
+struct RenderCfg {
+    #[serde(default)]
+    traversal: Traversal,
+    #[serde(default = "default_step")]
+    step: f64,
+    #[serde(default = "default_max_events")]
+    max_events: u32,
+    #[serde(default = "default_tolerance")]
+    tolerance: f64,
+    #[serde(default = "default_tile")]
+    tile: u32,
+    #[serde(default)]
+    classify: Option<Classify>,
+    #[serde(default)]
+    supersampling: Supersampling,
+    #[serde(default = "default_samples")]
+    samples: u32,
+    #[serde(default)]
+    seed: u64,
+}
+
+fn default_step() -> f64 {
+    0.1
+}
+fn default_max_events() -> u32 {
+    32
+}
+fn default_tolerance() -> f64 {
+    1e-7
+}
+fn default_tile() -> u32 {
+    16
+}
+fn default_samples() -> u32 {
+    4
+}
+
+impl Default for RenderCfg {
+    fn default() -> Self {
+        RenderCfg {
+            traversal: Traversal::default(),
+            step: default_step(),
+            max_events: default_max_events(),
+            tolerance: default_tolerance(),
+            tile: default_tile(),
+            classify: None,
+            supersampling: Supersampling::default(),
+            samples: default_samples(),
+            seed: 0,
+        }
+    }
+}
+
+// ---------------------------------------------------------------------------
+// The validated scene.
+
+/// Where the volume comes from.
+#[derive(Clone, Debug, PartialEq)]
+pub enum VolumeSource {
+    File {
+        path: PathBuf,
+        raw: Option<RawSpec>,
+        allow_nan: bool,
+    },
+    Phantom(PhantomSpec),
+}
+
+/// The refracting iso-surface.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Surface {
+    pub filter: FilterKind,
+    pub iso: f64,
+    /// Index of refraction where `f > iso` (the object).
+    pub ior: f64,
+    /// Index of refraction where `f <= iso` (the surrounding medium).
+    pub outside_ior: f64,
+}
+
+/// Render settings after validation.
+#[derive(Clone, Copy, Debug, PartialEq, serde::Serialize)]
+pub struct RenderSettings {
+    pub traversal: Traversal,
+    /// Step of `step` traversal, in voxels (grid units along the ray).
+    pub step: f64,
+    pub max_events: u32,
+    /// Crossing tolerance in voxels.
+    pub tolerance: f64,
+    /// Tile side in pixels.
+    pub tile: u32,
+    pub classify: Classify,
+    pub supersampling: Supersampling,
+    /// `N` for `N×N` rays per pixel (grid, jitter).
+    pub samples: u32,
+    pub seed: u64,
+}
+
+/// A scene ready to render (the volume is loaded separately, so caches can
+/// share it across scenes).
+#[derive(Clone, Debug)]
+pub struct Scene {
+    /// The file it came from, for messages (or a name for built-in scenes).
+    pub path: PathBuf,
+    pub width: u32,
+    pub height: u32,
+    pub background: [f32; 3],
+    pub camera: Camera,
+    pub volume: VolumeSource,
+    /// Spacing that overrides the volume's own.
+    pub spacing: Option<[f64; 3]>,
+    pub surface: Surface,
+    pub backdrop: Backdrop,
+    pub render: RenderSettings,
+}
+
+impl Scene {
+    /// Reads, overrides and validates a scene file.
+    pub fn load(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
+        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+            path: path.to_path_buf(),
+            source,
+        })?;
+        Scene::parse(&text, path, overrides)
+    }
+
+    /// Parses scene text; `path` is used for messages and relative paths.
+    pub fn parse(text: &str, path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
+        let mut table: toml::Table =
+            text.parse()
+                .map_err(|e: toml::de::Error| SceneError::Syntax {
+                    path: path.to_path_buf(),
+                    msg: e.to_string().trim().replace('\n', " "),
+                })?;
+        for o in overrides {
+            apply_override(&mut table, o)?;
+        }
+        let de = toml::Value::Table(table);
+        let file: SceneFile = serde_path_to_error::deserialize(de).map_err(|e| {
+            let key = e.path().to_string();
+            SceneError::Key {
+                path: path.to_path_buf(),
+                key: if key == "." { "scene".into() } else { key },
+                msg: e.into_inner().to_string().trim().replace('\n', " "),
+            }
+        })?;
+        resolve(file, path)
+    }
+
+    /// Loads (or builds) the volume and applies the scene's spacing override.
+    pub fn load_volume(&self, opts: &LoadOptions) -> Result<Volume, SceneError> {
+        let mut vol = match &self.volume {
+            VolumeSource::File {
+                path,
+                raw,
+                allow_nan,
+            } => {
+                let opts = LoadOptions {
+                    allow_nan: *allow_nan || opts.allow_nan,
+                    raw: raw.clone(),
+                    ..opts.clone()
+                };
+                crate::volume::load(path, &opts)?
+            }
+            VolumeSource::Phantom(spec) => spec.build().map_err(|e| SceneError::Phantom {
+                path: self.path.clone(),
+                msg: e.to_string(),
+            })?,
+        };
+        if let Some(s) = self.spacing {
+            vol.set_spacing(s)?;
+        }
+        Ok(vol)
+    }
+
+    /// The scene's checker size, if the backdrop is a checkerboard.
+    pub fn checker_size(&self) -> Option<f64> {
+        self.backdrop.checker_size()
+    }
+}
+
+/// Applies `section.key=value` (value in TOML syntax; bare words are strings).
+pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneError> {
+    let err = |msg: &str| SceneError::Override {
+        arg: arg.to_string(),
+        msg: msg.to_string(),
+    };
+    let (key, value) = arg
+        .split_once('=')
+        .ok_or_else(|| err("expected section.key=value"))?;
+    let parts: Vec<&str> = key.trim().split('.').map(str::trim).collect();
+    if parts.iter().any(|p| p.is_empty()) {
+        return Err(err("empty key"));
+    }
+    let value = value.trim();
+    let parsed: toml::Value = match format!("v = {value}").parse::<toml::Table>() {
+        Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.into())),
+        Err(_) => toml::Value::String(value.to_string()),
+    };
+    let mut cur = table;
+    for p in &parts[..parts.len() - 1] {
+        let entry = cur
+            .entry(p.to_string())
+            .or_insert_with(|| toml::Value::Table(toml::Table::new()));
+        cur = entry
+            .as_table_mut()
+            .ok_or_else(|| err(&format!("'{p}' is not a section")))?;
+    }
+    let last = parts[parts.len() - 1];
+    // Switching a volume between file and phantom: drop the other source.
+    if parts.len() >= 2 && parts[parts.len() - 2] == "volume" {
+        if last == "path" {
+            cur.remove("phantom");
+        } else if last == "phantom" {
+            cur.remove("path");
+        }
+    }
+    cur.insert(last.to_string(), parsed);
+    Ok(())
+}
+
+fn vec3(v: [f64; 3]) -> DVec3 {
+    DVec3::from_array(v)
+}
+
+fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
+    let bad = |key: &str, msg: String| SceneError::Key {
+        path: path.to_path_buf(),
+        key: key.to_string(),
+        msg,
+    };
+    let base = path.parent().unwrap_or(Path::new("."));
+
+    // [image]
+    let (w, h) = (f.image.width, f.image.height);
+    if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
+        return Err(bad(
+            "image",
+            format!("width and height must be in 1..={MAX_IMAGE_SIDE}, got {w}x{h}"),
+        ));
+    }
+    if (w as u64) * (h as u64) > MAX_IMAGE_PIXELS {
+        return Err(bad(
+            "image",
+            format!("{w}x{h} exceeds {MAX_IMAGE_PIXELS} pixels"),
+        ));
+    }
+    check_color(&f.image.background).map_err(|m| bad("image.background", m))?;
+
+    // [camera]
+    let c = &f.camera;
+    let projection = match c.kind {
+        CameraKind::Perspective => {
+            let fov = c.fov_y.ok_or_else(|| {
+                bad(
+                    "camera.fov_y",
+                    "a perspective camera needs fov_y (degrees)".into(),
+                )
+            })?;
+            if !(fov > 0.0 && fov < 180.0) {
+                return Err(bad(
+                    "camera.fov_y",
+                    format!("must be in (0, 180) degrees, got {fov}"),
+                ));
+            }
+            Projection::Perspective {
+                tan_half_fov: (fov.to_radians() / 2.0).tan(),
+            }
+        }
+        CameraKind::Orthographic => {
+            let height = c.height.ok_or_else(|| {
+                bad(
+                    "camera.height",
+                    "an orthographic camera needs height (world units)".into(),
+                )
+            })?;
+            Projection::Orthographic {
+                half_height: height / 2.0,
+            }
+        }
+    };
+    let camera = Camera::new(
+        vec3(c.position),
+        vec3(c.look_at),
+        vec3(c.up),
+        projection,
+        w,
+        h,
+    )
+    .map_err(|e| bad("camera", e.to_string()))?;
+
+    // [volume]
+    let v = &f.volume;
+    let volume = match (&v.path, &v.phantom) {
+        (Some(_), Some(_)) => {
+            return Err(bad(
+                "volume",
+                "give either path or [volume.phantom], not both".into(),
+            ));
+        }
+        (None, None) => return Err(bad("volume", "needs path or [volume.phantom]".into())),
+        (Some(p), None) => {
+            let raw = match &v.raw {
+                None => None,
+                Some(r) => Some(RawSpec {
+                    dims: r.dims,
+                    sample_type: SampleType::parse(&r.sample_type).ok_or_else(|| {
+                        bad(
+                            "volume.raw.type",
+                            format!("unknown sample type '{}'", r.sample_type),
+                        )
+                    })?,
+                    endian: Endian::parse(&r.endian).ok_or_else(|| {
+                        bad(
+                            "volume.raw.endian",
+                            format!("expected little or big, got '{}'", r.endian),
+                        )
+                    })?,
+                    spacing: v.spacing.unwrap_or([1.0; 3]),
+                    offset: r.offset,
+                }),
+            };
+            VolumeSource::File {
+                path: base.join(p),
+                raw,
+                allow_nan: v.allow_nan,
+            }
+        }
+        (None, Some(spec)) => VolumeSource::Phantom(spec.clone()),
+    };
+    if let Some(s) = v.spacing
+        && !s.iter().all(|x| x.is_finite() && *x > 0.0)
+    {
+        return Err(bad(
+            "volume.spacing",
+            format!("must be finite and > 0, got {s:?}"),
+        ));
+    }
+
+    // [surface]
+    let s = &f.surface;
+    let filter =
+        FilterKind::parse(&s.filter, s.lambda).map_err(|e| bad("surface.filter", e.to_string()))?;
+    if !s.iso.is_finite() {
+        return Err(bad("surface.iso", format!("must be finite, got {}", s.iso)));
+    }
+    for (key, ior) in [
+        ("surface.ior", s.ior),
+        ("surface.outside_ior", s.outside_ior),
+    ] {
+        if !(ior.is_finite() && ior > 0.0) {
+            return Err(bad(
+                key,
+                format!("index of refraction must be > 0, got {ior}"),
+            ));
+        }
+    }
+    let surface = Surface {
+        filter,
+        iso: s.iso,
+        ior: s.ior,
+        outside_ior: s.outside_ior,
+    };
+
+    // [backdrop]
+    let b = &f.backdrop;
+    let center = vec3(b.center);
+    let normal = vec3(b.normal);
+    let u_raw = vec3(b.u_axis);
+    if !(center.is_finite() && normal.is_finite() && u_raw.is_finite()) {
+        return Err(bad(
+            "backdrop",
+            "center, normal and u_axis must be finite".into(),
+        ));
+    }
+    if normal.length() < 1e-12 {
+        return Err(bad("backdrop.normal", "must not be zero".into()));
+    }
+    let normal = normal.normalize();
+    // Gram–Schmidt: keep u in the plane; SPEC's v = cross(normal, u) is then unit.
+    let u_in_plane = u_raw - u_raw.dot(normal) * normal;
+    if u_in_plane.length() < 1e-9 * u_raw.length().max(1e-300) || u_raw.length() == 0.0 {
+        return Err(bad(
+            "backdrop.u_axis",
+            "must not be zero or parallel to normal".into(),
+        ));
+    }
+    let u_axis = u_in_plane.normalize();
+    let v_axis = normal.cross(u_axis);
+    let pattern = match (b.checker, &b.image) {
+        (Some(_), Some(_)) => {
+            return Err(bad(
+                "backdrop",
+                "give either checker or image, not both".into(),
+            ));
+        }
+        (None, None) => {
+            return Err(bad(
+                "backdrop",
+                "needs checker = <size> or image = <file>".into(),
+            ));
+        }
+        (Some(size), None) => {
+            if !(size.is_finite() && size > 0.0) {
+                return Err(bad(
+                    "backdrop.checker",
+                    format!("square size must be > 0, got {size}"),
+                ));
+            }
+            let colors = b.checker_colors.unwrap_or([[1.0; 3], [0.0; 3]]);
+            for c in &colors {
+                check_color(c).map_err(|m| bad("backdrop.checker_colors", m))?;
+            }
+            Pattern::Checker { size, colors }
+        }
+        (None, Some(img)) => {
+            let width = b.width.ok_or_else(|| {
+                bad(
+                    "backdrop.width",
+                    "an image backdrop needs width (world units)".into(),
+                )
+            })?;
+            if !(width.is_finite() && width > 0.0) {
+                return Err(bad("backdrop.width", format!("must be > 0, got {width}")));
+            }
+            let outside = b.outside.unwrap_or(f.image.background);
+            check_color(&outside).map_err(|m| bad("backdrop.outside", m))?;
+            let file = base.join(img);
+            Pattern::Image(
+                load_texture(&file, width, outside).map_err(|m| bad("backdrop.image", m))?,
+            )
+        }
+    };
+    let backdrop = Backdrop {
+        center,
+        normal,
+        u_axis,
+        v_axis,
+        pattern,
+    };
+
+    // [render]
+    let r = &f.render;
+    if !(r.step.is_finite() && r.step > 0.0 && r.step <= 16.0) {
+        return Err(bad(
+            "render.step",
+            format!("must be in (0, 16] voxels, got {}", r.step),
+        ));
+    }
+    if r.max_events == 0 || r.max_events > 100_000 {
+        return Err(bad(
+            "render.max_events",
+            format!("must be in 1..=100000, got {}", r.max_events),
+        ));
+    }
+    if !(r.tolerance.is_finite() && r.tolerance >= 1e-12 && r.tolerance <= 0.1) {
+        return Err(bad(
+            "render.tolerance",
+            format!("must be in [1e-12, 0.1] voxels, got {}", r.tolerance),
+        ));
+    }
+    if r.tile == 0 || r.tile > 256 {
+        return Err(bad(
+            "render.tile",
+            format!("must be in 1..=256, got {}", r.tile),
+        ));
+    }
+    if r.samples == 0 || r.samples > 64 {
+        return Err(bad(
+            "render.samples",
+            format!("must be in 1..=64, got {}", r.samples),
+        ));
+    }
+    let classify = r.classify.unwrap_or(match r.traversal {
+        Traversal::Octree => Classify::Accc,
+        _ => Classify::None,
+    });
+    if r.traversal == Traversal::Octree && classify == Classify::None {
+        return Err(bad(
+            "render.classify",
+            "the octree is built over classified cells: use bmcc or accc".into(),
+        ));
+    }
+    let render = RenderSettings {
+        traversal: r.traversal,
+        step: r.step,
+        max_events: r.max_events,
+        tolerance: r.tolerance,
+        tile: r.tile,
+        classify,
+        supersampling: r.supersampling,
+        samples: r.samples,
+        seed: r.seed,
+    };
+
+    Ok(Scene {
+        path: path.to_path_buf(),
+        width: w,
+        height: h,
+        background: f.image.background,
+        camera,
+        volume,
+        spacing: v.spacing,
+        surface,
+        backdrop,
+        render,
+    })
+}
+
+fn check_color(c: &[f32; 3]) -> Result<(), String> {
+    if c.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(format!("colour {c:?} must be finite"))
+    }
+}
+
+/// Loads a PNG/JPEG photograph as an RGB texture in `[0, 1]`.
+fn load_texture(path: &Path, world_width: f64, outside: [f32; 3]) -> Result<Texture, String> {
+    let img = image::ImageReader::open(path)
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .with_guessed_format()
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    let (w, h) = img
+        .into_dimensions()
+        .map_err(|e| format!("{}: {e}", path.display()))?;
+    if w == 0 || h == 0 || (w as u64) * (h as u64) > MAX_IMAGE_PIXELS {
+        return Err(format!(
+            "{}: image size {w}x{h} not supported",
+            path.display()
+        ));
+    }
+    let img = image::ImageReader::open(path)
+        .and_then(|r| r.with_guessed_format())
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .decode()
+        .map_err(|e| format!("{}: {e}", path.display()))?
+        .to_rgb32f();
+    let pixels = img.pixels().map(|p| p.0).collect();
+    Ok(Texture {
+        width_px: w as usize,
+        height_px: h as usize,
+        pixels,
+        world_width,
+        outside,
+    })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SCENE: &str = r#"
+[image]
+width = 64
+height = 48
+
+[camera]
+position = [31.5, 31.5, -150.0]
+look_at = [31.5, 31.5, 31.5]
+fov_y = 20.0
+
+[volume.phantom]
+kind = "sphere"
+size = 32
+format = "u8"
+
+[surface]
+filter = "bspline3"
+iso = 127.5
+ior = 1.5
+
+[backdrop]
+center = [31.5, 31.5, 200.0]
+normal = [0.0, 0.0, -1.0]
+u_axis = [1.0, 0.0, 0.0]
+checker = 8.0
+"#;
+
+    fn parse(extra: &[&str]) -> Result<Scene, SceneError> {
+        let o: Vec<String> = extra.iter().map(|s| s.to_string()).collect();
+        Scene::parse(SCENE, Path::new("test.toml"), &o)
+    }
+
+    #[test]
+    fn parses_with_defaults() {
+        let s = parse(&[]).unwrap();
+        assert_eq!((s.width, s.height), (64, 48));
+        assert_eq!(s.render.traversal, Traversal::Dda);
+        assert_eq!(s.render.max_events, 32);
+        assert_eq!(s.surface.outside_ior, 1.0);
+        assert!(matches!(s.volume, VolumeSource::Phantom(_)));
+        assert_eq!(s.backdrop.v_axis, DVec3::new(0.0, -1.0, 0.0));
+    }
+
+    #[test]
+    fn overrides_apply_and_are_checked() {
+        let s = parse(&[
+            "surface.ior=1.33",
+            "render.traversal=step",
+            "surface.filter=linear",
+        ])
+        .unwrap();
+        assert_eq!(s.surface.ior, 1.33);
+        assert_eq!(s.render.traversal, Traversal::Step);
+        assert_eq!(s.surface.filter, FilterKind::Linear);
+        let e = parse(&["surface.ior=-1"]).unwrap_err().to_string();
+        assert!(e.contains("test.toml") && e.contains("surface.ior"), "{e}");
+        let e = parse(&["nonsense"]).unwrap_err().to_string();
+        assert!(e.contains("--set nonsense"), "{e}");
+        let s = parse(&["volume.path=x.nrrd"]).unwrap();
+        assert!(matches!(s.volume, VolumeSource::File { .. }));
+    }
+
+    #[test]
+    fn errors_name_the_key() {
+        let cases: &[(&[&str], &str)] = &[
+            (&["surface.filter=gauss"], "surface.filter"),
+            (&["surface.lambda=-2"], "surface.filter"),
+            (&["camera.look_at=[31.5, 31.5, -150.0]"], "camera"),
+            (&["camera.up=[0.0, 0.0, 1.0]"], "camera"),
+            (&["camera.fov_y=0"], "camera.fov_y"),
+            (&["image.width=0"], "image"),
+            (&["surface.isoo=3"], "surface"),
+            (&["surface.iso=\"high\""], "surface.iso"),
+            (&["backdrop.checker=0"], "backdrop.checker"),
+            (&["backdrop.u_axis=[0.0, 0.0, 2.0]"], "backdrop.u_axis"),
+            (
+                &["render.traversal=octree", "render.classify=none"],
+                "render.classify",
+            ),
+            (&["render.tolerance=0"], "render.tolerance"),
+        ];
+        for (o, key) in cases {
+            let e = parse(o).unwrap_err().to_string();
+            assert!(e.contains(key) && e.contains("test.toml"), "{o:?}: {e}");
+        }
+        let e = Scene::parse("[image\nwidth=3", Path::new("bad.toml"), &[])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("bad.toml") && e.contains("line"), "{e}");
+    }
+}
