@@ -1,7 +1,6 @@
 //! `snell render`: a scene file to images, hit positions and a profile.
 
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::{Duration, Instant};
 
@@ -63,10 +62,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .build()
         .context("cannot start worker threads")?;
 
-    let load_start = Instant::now();
-    let volume = scene.load_volume(&LoadOptions::default())?;
-    let load_s = load_start.elapsed().as_secs_f64();
-    let (lo, hi) = volume
+    let prep = pool.install(|| Prepared::for_scene(&scene, &LoadOptions::default()))?;
+    let (lo, hi) = prep
+        .volume
         .samples()
         .iter()
         .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
@@ -80,8 +78,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     let frame = pool.install(|| {
-        let mut prep = Prepared::new(Arc::new(volume), scene.surface.filter);
-        prep.times.load_s = load_s;
         let tiles = render::tile::tiles(scene.width, scene.height, scene.render.tile).len();
         let done = AtomicUsize::new(0);
         std::thread::scope(|s| {

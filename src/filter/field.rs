@@ -59,6 +59,8 @@ pub struct Field<T: Coefficient = f64> {
     kind: FilterKind,
     kernel: Kernel,
     coeffs: Coeffs<T>,
+    /// Largest coefficient magnitude (computed once; see `separating_iso`).
+    max_abs: f64,
 }
 
 impl Field<f64> {
@@ -75,11 +77,7 @@ impl Field<f64> {
             coeffs.fill_apron();
         }
         debug_assert!(APRON >= kind.kernel().support() / 2);
-        Field {
-            kind,
-            kernel: kind.kernel(),
-            coeffs,
-        }
+        Field::from_coeffs(kind, coeffs)
     }
 }
 
@@ -95,21 +93,22 @@ impl Field<f32> {
             prefilter.apply_3d(&mut work, vol.dims());
             Coeffs::from_interior(vol.dims(), &work, |v: &f64| *v as f32)
         };
-        Field {
-            kind,
-            kernel: kind.kernel(),
-            coeffs,
-        }
+        Field::from_coeffs(kind, coeffs)
     }
 }
 
 impl<T: Coefficient> Field<T> {
     /// Wraps ready-made coefficients (e.g. loaded from a cache).
     pub fn from_coeffs(kind: FilterKind, coeffs: Coeffs<T>) -> Field<T> {
+        let max_abs = coeffs
+            .data()
+            .iter()
+            .fold(0.0f64, |m, c| m.max(c.to_f64().abs()));
         Field {
             kind,
             kernel: kind.kernel(),
             coeffs,
+            max_abs,
         }
     }
 
@@ -124,6 +123,22 @@ impl<T: Coefficient> Field<T> {
     }
     pub fn dims(&self) -> [usize; 3] {
         self.coeffs.dims()
+    }
+
+    /// Largest coefficient magnitude: the scale of rounding in evaluations.
+    pub fn max_abs_coeff(&self) -> f64 {
+        self.max_abs
+    }
+
+    /// The iso-value nudged just above evaluation rounding noise.
+    ///
+    /// Weights sum to one only to within rounding, so a plateau at exactly the
+    /// iso-value evaluates to `iso ± 1e-13` and would flicker between inside
+    /// and outside. Deciding sides against `iso + ε`, with `ε` far above f64
+    /// summation noise (≈1e-14 of the coefficient scale) yet far below any
+    /// geometric tolerance, makes "equal to the iso-value" reliably outside.
+    pub fn separating_iso(&self, iso: f64) -> f64 {
+        iso + 1e-11 * iso.abs().max(self.max_abs_coeff()).max(f64::MIN_POSITIVE)
     }
 
     /// Maps a grid coordinate into the domain `[0, n-1]` by the mirror symmetry

@@ -22,6 +22,8 @@ pub enum Skip<'a> {
 pub struct Ctx<'a> {
     pub scene: &'a Scene,
     pub field: &'a Field,
+    /// The scene's iso-value, nudged above rounding noise
+    /// ([`Field::separating_iso`]); every side decision uses it.
     pub iso: f64,
     pub lattice: Lattice,
     pub spacing: DVec3,
@@ -50,7 +52,7 @@ impl<'a> Ctx<'a> {
         Ctx {
             scene,
             field,
-            iso: scene.surface.iso,
+            iso: field.separating_iso(scene.surface.iso),
             lattice,
             spacing,
             inv_spacing: DVec3::ONE / spacing,

@@ -30,8 +30,8 @@ pub use stats::{Counters, PrepareTimes, RenderStats};
 
 use crate::film::Film;
 use crate::filter::{Field, FilterKind};
-use crate::scene::Scene;
-use crate::volume::Volume;
+use crate::scene::{Scene, SceneError};
+use crate::volume::{LoadOptions, Volume};
 use crate::with_support;
 
 /// What a frame needs that does not depend on camera, backdrop or ior: the
@@ -56,6 +56,24 @@ impl Prepared {
             },
         }
     }
+}
+
+impl Prepared {
+    /// Loads the scene's volume and prefilters it.
+    pub fn for_scene(scene: &Scene, opts: &LoadOptions) -> Result<Prepared, SceneError> {
+        let start = Instant::now();
+        let volume = scene.load_volume(opts)?;
+        let load_s = start.elapsed().as_secs_f64();
+        let mut p = Prepared::new(Arc::new(volume), scene.surface.filter);
+        p.times.load_s = load_s;
+        Ok(p)
+    }
+}
+
+/// Loads, prepares and renders a scene in one call (on the current rayon pool).
+pub fn render_scene(scene: &Scene) -> Result<Frame, SceneError> {
+    let prep = Prepared::for_scene(scene, &LoadOptions::default())?;
+    Ok(render(scene, &prep, None))
 }
 
 /// A rendered frame and how it was made.
