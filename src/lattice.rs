@@ -53,9 +53,8 @@ impl Lattice {
     /// Cell holding grid coordinate `x` along `axis`, clamped into range.
     #[inline(always)]
     pub fn cell_of(&self, axis: usize, x: f64) -> i64 {
-        let c = (x + self.offset).floor();
-        let hi = self.cells[axis] as f64 - 1.0;
-        c.clamp(0.0, hi.max(0.0)) as i64
+        let c = crate::filter::kernel::floor_i64(x + self.offset);
+        c.clamp(0, (self.cells[axis] as i64 - 1).max(0))
     }
 
     /// Linear index of a cell (x fastest).

@@ -115,8 +115,8 @@ impl Kernel {
     #[inline]
     pub fn locate(&self, x: f64) -> (isize, f64) {
         let shifted = x - 0.5 * self.support as f64;
-        let fl = shifted.floor();
-        (fl as isize + 1, shifted - fl)
+        let fl = floor_i64(shifted);
+        (fl as isize + 1, shifted - fl as f64)
     }
 
     /// The `S` weights at fractional position `t`.
@@ -200,6 +200,15 @@ impl Kernel {
         let pad = 1e-14 * (1.0 + lo.abs().max(hi.abs()));
         (lo - pad, hi + pad)
     }
+}
+
+/// `floor(x)` as an integer without a libm call (the generic x86-64 target
+/// has no rounding instruction, and this sits in every point evaluation and
+/// traversal step). Saturates for huge or infinite `x`.
+#[inline(always)]
+pub fn floor_i64(x: f64) -> i64 {
+    let i = x as i64;
+    i - ((i as f64) > x) as i64
 }
 
 /// Evaluates `Σ p[m] t^m`.

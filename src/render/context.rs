@@ -6,6 +6,8 @@ use glam::DVec3;
 use crate::classify::CellBound;
 use crate::filter::Field;
 use crate::lattice::Lattice;
+use crate::octree::Octree;
+use crate::prepare::Prepared;
 use crate::roots::bernstein::BernsteinBasis;
 use crate::scene::{RenderSettings, Scene, Traversal};
 
@@ -13,9 +15,9 @@ use crate::scene::{RenderSettings, Scene, Traversal};
 pub enum Skip<'a> {
     /// A bound from the cell's coefficients, computed per visited cell.
     Bound(CellBound),
-    /// Placeholder for precomputed structures (classification tags, octree).
-    #[allow(dead_code)]
-    Prepared(&'a ()),
+    /// Precomputed tags under an octree; `leaf_level` is where the top-down
+    /// search stops (the root's level for a plain DDA over the tags).
+    Octree { tree: &'a Octree, leaf_level: u32 },
 }
 
 /// Shared, read-only state of one frame.
@@ -39,7 +41,9 @@ pub struct Ctx<'a> {
 }
 
 impl<'a> Ctx<'a> {
-    pub fn new(scene: &'a Scene, field: &'a Field, spacing: [f64; 3]) -> Ctx<'a> {
+    pub fn new(scene: &'a Scene, prep: &'a Prepared) -> Ctx<'a> {
+        let field: &Field = &prep.field;
+        let spacing = prep.volume.spacing();
         let kernel = field.kernel();
         let lattice = Lattice::new(kernel, field.dims());
         let spacing = DVec3::from_array(spacing);
@@ -58,7 +62,17 @@ impl<'a> Ctx<'a> {
             inv_spacing: DVec3::ONE / spacing,
             box_max,
             basis: BernsteinBasis::new(3 * (kernel.support() - 1)),
-            skip: Skip::Bound(CellBound::new(kernel)),
+            skip: match (&prep.accel, scene.render.traversal) {
+                (Some(a), Traversal::Octree) => Skip::Octree {
+                    tree: &a.octree,
+                    leaf_level: scene.render.leaf.max(1).ilog2(),
+                },
+                (Some(a), Traversal::Dda) => Skip::Octree {
+                    tree: &a.octree,
+                    leaf_level: a.octree.top(),
+                },
+                _ => Skip::Bound(CellBound::new(kernel)),
+            },
             settings: scene.render,
             ior_inside: scene.surface.ior,
             ior_outside: scene.surface.outside_ior,

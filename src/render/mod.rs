@@ -18,7 +18,6 @@ pub mod stages;
 pub mod stats;
 pub mod tile;
 
-use std::sync::Arc;
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
 
@@ -29,46 +28,10 @@ pub use context::Ctx;
 pub use stats::{Counters, PrepareTimes, RenderStats};
 
 use crate::film::Film;
-use crate::filter::{Field, FilterKind};
+pub use crate::prepare::Prepared;
 use crate::scene::{Scene, SceneError};
-use crate::volume::{LoadOptions, Volume};
+use crate::volume::LoadOptions;
 use crate::with_support;
-
-/// What a frame needs that does not depend on camera, backdrop or ior: the
-/// volume and its prefiltered field. Built once, reused across frames.
-pub struct Prepared {
-    pub volume: Arc<Volume>,
-    pub field: Arc<Field>,
-    pub times: PrepareTimes,
-}
-
-impl Prepared {
-    /// Prefilters `volume` for `filter` (timed).
-    pub fn new(volume: Arc<Volume>, filter: FilterKind) -> Prepared {
-        let start = Instant::now();
-        let field = Arc::new(Field::new(&volume, filter));
-        Prepared {
-            volume,
-            field,
-            times: PrepareTimes {
-                prefilter_s: start.elapsed().as_secs_f64(),
-                ..Default::default()
-            },
-        }
-    }
-}
-
-impl Prepared {
-    /// Loads the scene's volume and prefilters it.
-    pub fn for_scene(scene: &Scene, opts: &LoadOptions) -> Result<Prepared, SceneError> {
-        let start = Instant::now();
-        let volume = scene.load_volume(opts)?;
-        let load_s = start.elapsed().as_secs_f64();
-        let mut p = Prepared::new(Arc::new(volume), scene.surface.filter);
-        p.times.load_s = load_s;
-        Ok(p)
-    }
-}
 
 /// Loads, prepares and renders a scene in one call (on the current rayon pool).
 pub fn render_scene(scene: &Scene) -> Result<Frame, SceneError> {
@@ -85,7 +48,7 @@ pub struct Frame {
 /// Renders `scene` with `prep` on the current rayon pool. `progress`, when
 /// given, counts finished tiles (for a progress bar).
 pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) -> Frame {
-    let ctx = Ctx::new(scene, &prep.field, prep.volume.spacing());
+    let ctx = Ctx::new(scene, prep);
     let tiles = tile::tiles(scene.width, scene.height, scene.render.tile);
     let start = Instant::now();
     let outs: Vec<tile::TileOut> = tiles

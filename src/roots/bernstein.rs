@@ -15,6 +15,9 @@ use super::{brent, inside};
 pub const MAX_DEGREE: usize = 21;
 const N: usize = MAX_DEGREE + 1;
 
+/// One pending interval of the isolation: `[lo, hi]` and its coefficients.
+pub type Interval = (f64, f64, [f64; N]);
+
 /// Work counters for the stats.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct IsolationWork {
@@ -122,6 +125,18 @@ impl SegmentPoly {
         tol: f64,
         work: &mut IsolationWork,
     ) -> Option<f64> {
+        self.first_crossing_with(from_inside, tol, work, &mut Vec::new())
+    }
+
+    /// [`SegmentPoly::first_crossing`] with a caller-owned stack, so a stage
+    /// solving many segments allocates it once.
+    pub fn first_crossing_with(
+        &self,
+        from_inside: bool,
+        tol: f64,
+        work: &mut IsolationWork,
+        stack: &mut Vec<Interval>,
+    ) -> Option<f64> {
         let d = self.degree;
         if self.stays(from_inside) {
             // The common case in a cell fringe: certified without subdividing.
@@ -130,13 +145,9 @@ impl SegmentPoly {
         }
         // Explicit stack of intervals (lo, hi, coefficients), left first; depth
         // first, so it holds at most one pending right half per level.
-        let mut stack: [(f64, f64, [f64; N]); 64] = [(0.0, 0.0, [0.0; N]); 64];
-        let mut top = 0usize;
-        stack[0] = (0.0, 1.0, self.bern);
-        top += 1;
-        while top > 0 {
-            top -= 1;
-            let (lo, hi, b) = stack[top];
+        stack.clear();
+        stack.push((0.0, 1.0, self.bern));
+        while let Some((lo, hi, b)) = stack.pop() {
             work.intervals += 1;
             let coeffs = &b[..=d];
             let variations = coeffs
@@ -164,19 +175,10 @@ impl SegmentPoly {
                 }
                 return Some(0.5 * (lo + hi));
             }
-            if top + 2 > stack.len() {
-                // Depth exhausted (cannot happen for tol > 2^-60): treat the
-                // interval as resolved at its midpoint if it changes side.
-                if start_in == from_inside && end_in != from_inside {
-                    return Some(0.5 * (lo + hi));
-                }
-                continue;
-            }
             let (left, right) = split_half(&b, d);
             let mid = 0.5 * (lo + hi);
-            stack[top] = (mid, hi, right);
-            stack[top + 1] = (lo, mid, left);
-            top += 2;
+            stack.push((mid, hi, right));
+            stack.push((lo, mid, left));
         }
         None
     }

@@ -17,9 +17,13 @@ use serde::Deserialize;
 pub use backdrop::{Backdrop, Pattern, Texture};
 pub use camera::{Camera, CameraError, Projection};
 
+use crate::classify::Method;
 use crate::filter::FilterKind;
 use crate::phantom::PhantomSpec;
 use crate::volume::{Endian, LoadOptions, RawSpec, SampleType, Volume, VolumeError};
+
+/// Classification the octree uses when the scene names none.
+pub const DEFAULT_OCTREE_CLASSIFY: Method = Method::Accc;
 
 /// Largest image side accepted (and 2^28 pixels in all).
 pub const MAX_IMAGE_SIDE: u32 = 32768;
@@ -179,19 +183,6 @@ pub enum Traversal {
     Octree,
 }
 
-/// Cell classification used to skip cells.
-#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Classify {
-    /// No precomputation: a bound from the cell's coefficients, on the fly.
-    #[default]
-    None,
-    /// Binary morphological classification (Thévenaz & Unser 2003).
-    Bmcc,
-    /// Approximate continuous classification (the paper's equation 1).
-    Accc,
-}
-
 /// How many rays per pixel, and how their colours combine.
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
@@ -216,8 +207,12 @@ struct RenderCfg {
     tolerance: f64,
     #[serde(default = "default_tile")]
     tile: u32,
+    /// `none`, `bmcc`, `accc`, `accc2`, `accc4`, `bezier` (see `classify`).
     #[serde(default)]
-    classify: Option<Classify>,
+    classify: Option<String>,
+    /// Octree leaf side in cells (a power of two).
+    #[serde(default = "default_leaf")]
+    leaf: u32,
     #[serde(default)]
     supersampling: Supersampling,
     #[serde(default = "default_samples")]
@@ -241,6 +236,9 @@ fn default_tile() -> u32 {
 fn default_samples() -> u32 {
     4
 }
+fn default_leaf() -> u32 {
+    4
+}
 
 impl Default for RenderCfg {
     fn default() -> Self {
@@ -251,6 +249,7 @@ impl Default for RenderCfg {
             tolerance: default_tolerance(),
             tile: default_tile(),
             classify: None,
+            leaf: default_leaf(),
             supersampling: Supersampling::default(),
             samples: default_samples(),
             seed: 0,
@@ -294,7 +293,10 @@ pub struct RenderSettings {
     pub tolerance: f64,
     /// Tile side in pixels.
     pub tile: u32,
-    pub classify: Classify,
+    /// Precomputed classification (`None`: a bound per cell, on the fly).
+    pub classify: Option<Method>,
+    /// Octree leaf side in cells.
+    pub leaf: u32,
     pub supersampling: Supersampling,
     /// `N` for `N×N` rays per pixel (grid, jitter).
     pub samples: u32,
@@ -676,14 +678,37 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             format!("must be in 1..=64, got {}", r.samples),
         ));
     }
-    let classify = r.classify.unwrap_or(match r.traversal {
-        Traversal::Octree => Classify::Accc,
-        _ => Classify::None,
-    });
-    if r.traversal == Traversal::Octree && classify == Classify::None {
+    let classify = match r.classify.as_deref() {
+        None if r.traversal == Traversal::Octree => Some(DEFAULT_OCTREE_CLASSIFY),
+        None | Some("none") => None,
+        Some(name) => match Method::parse(name) {
+            Some(m) if m.is_conservative() => Some(m),
+            _ => {
+                return Err(bad(
+                    "render.classify",
+                    format!(
+                        "unknown or non-conservative method '{name}' (none, bmcc, accc, accc2, accc4, bezier)"
+                    ),
+                ));
+            }
+        },
+    };
+    if r.traversal == Traversal::Octree && classify.is_none() {
         return Err(bad(
             "render.classify",
-            "the octree is built over classified cells: use bmcc or accc".into(),
+            "the octree is built over classified cells: use bmcc, accc or bezier".into(),
+        ));
+    }
+    if r.traversal == Traversal::Step && classify.is_some() {
+        return Err(bad(
+            "render.classify",
+            "step traversal samples every point and uses no classification".into(),
+        ));
+    }
+    if !r.leaf.is_power_of_two() || r.leaf > 64 {
+        return Err(bad(
+            "render.leaf",
+            format!("must be a power of two up to 64, got {}", r.leaf),
         ));
     }
     let render = RenderSettings {
@@ -693,6 +718,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         tolerance: r.tolerance,
         tile: r.tile,
         classify,
+        leaf: r.leaf,
         supersampling: r.supersampling,
         samples: r.samples,
         seed: r.seed,

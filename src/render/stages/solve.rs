@@ -14,7 +14,7 @@ use super::super::packet::{Queue, Rays};
 use super::field_minus_iso;
 use crate::filter::restrict::knot_cell;
 use crate::render::stats::Counters;
-use crate::roots::bernstein::{IsolationWork, MAX_DEGREE};
+use crate::roots::bernstein::{Interval, IsolationWork, MAX_DEGREE};
 use crate::roots::{brent, inside};
 use crate::scene::Traversal;
 
@@ -34,18 +34,21 @@ pub fn solve<const S: usize>(
         }
         Traversal::Dda | Traversal::Octree => {
             let mut g = [0.0; MAX_DEGREE + 1];
+            let mut stack = Vec::with_capacity(64);
             for &r in input {
-                solve_cell::<S>(ctx, rays, r, &mut g, refract, traverse, c);
+                solve_cell::<S>(ctx, rays, r, &mut g, &mut stack, refract, traverse, c);
             }
         }
     }
 }
 
+#[allow(clippy::too_many_arguments)]
 fn solve_cell<const S: usize>(
     ctx: &Ctx,
     rays: &mut Rays,
     r: u32,
     g: &mut [f64; MAX_DEGREE + 1],
+    stack: &mut Vec<Interval>,
     refract: &mut Queue,
     traverse: &mut Queue,
     c: &mut Counters,
@@ -69,7 +72,7 @@ fn solve_cell<const S: usize>(
         let poly = ctx.basis.segment(&g[..=ctx.basis.degree()]);
         let tol = (ctx.settings.tolerance / len).min(0.25);
         let mut work = IsolationWork::default();
-        let hit = poly.first_crossing(rays.inside[i], tol, &mut work);
+        let hit = poly.first_crossing_with(rays.inside[i], tol, &mut work, stack);
         c.isolation_intervals += work.intervals as u64;
         c.brent_iters += work.brent_iters as u64;
         if let Some(s) = hit {

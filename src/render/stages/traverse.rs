@@ -10,6 +10,7 @@
 use super::super::context::{Ctx, Skip};
 use super::super::packet::{Fate, Queue, Rays};
 use super::field_minus_iso;
+use crate::filter::kernel::floor_i64;
 use crate::render::stats::Counters;
 use crate::roots::inside;
 use crate::scene::Traversal;
@@ -36,31 +37,44 @@ pub fn traverse<const S: usize>(
     }
 }
 
-/// Where a ray with cell-space origin `ou` and direction `du` leaves the
-/// aligned block of `2^level` cells holding `cell` (not before `t`), and the
-/// cell it enters there.
+/// A ray in cell coordinates: origin, direction and its reciprocal.
+#[derive(Clone, Copy, Debug)]
+pub struct CellRay {
+    pub ou: [f64; 3],
+    pub du: [f64; 3],
+    /// `1/du`, unused where `du == 0`.
+    pub inv: [f64; 3],
+}
+
+impl CellRay {
+    pub fn new(ou: [f64; 3], du: [f64; 3]) -> CellRay {
+        CellRay {
+            ou,
+            du,
+            inv: du.map(|d| if d != 0.0 { 1.0 / d } else { 0.0 }),
+        }
+    }
+}
+
+/// Where the ray leaves the aligned block of `2^level` cells holding `cell`
+/// (not before `t`), and the cell it enters there.
 ///
 /// The exit axis moves to the neighbouring block exactly; the other axes come
 /// from the exit point, clamped into the block and never moving backwards, so
 /// every step makes progress whatever the rounding (rays along faces, edges
 /// and corners included).
 #[inline(always)]
-pub fn exit_block(
-    ou: [f64; 3],
-    du: [f64; 3],
-    cell: [i64; 3],
-    level: u32,
-    t: f64,
-) -> (f64, [i64; 3]) {
+pub fn exit_block(ray: &CellRay, cell: [i64; 3], level: u32, t: f64) -> (f64, [i64; 3]) {
+    let CellRay { ou, du, inv } = *ray;
     let size = 1i64 << level;
     let lo = cell.map(|c| (c >> level) << level);
     let mut t_exit = f64::INFINITY;
     let mut axis = 0;
     for a in 0..3 {
         let ta = if du[a] > 0.0 {
-            ((lo[a] + size) as f64 - ou[a]) / du[a]
+            ((lo[a] + size) as f64 - ou[a]) * inv[a]
         } else if du[a] < 0.0 {
-            (lo[a] as f64 - ou[a]) / du[a]
+            (lo[a] as f64 - ou[a]) * inv[a]
         } else {
             f64::INFINITY
         };
@@ -75,7 +89,7 @@ pub fn exit_block(
         if a == axis {
             next[a] = if du[a] > 0.0 { lo[a] + size } else { lo[a] - 1 };
         } else if du[a] != 0.0 {
-            let at = (ou[a] + t_new * du[a]).floor() as i64;
+            let at = floor_i64(ou[a] + t_new * du[a]);
             let at = at.clamp(lo[a], lo[a] + size - 1);
             next[a] = if du[a] > 0.0 {
                 at.max(cell[a])
@@ -105,14 +119,13 @@ fn walk(
     let og = ctx.to_grid(rays.origin(i));
     let dg = ctx.to_grid(rays.direction(i));
     let off = ctx.lattice.offset;
-    let ou = [og.x + off, og.y + off, og.z + off];
-    let du = [dg.x, dg.y, dg.z];
+    let ray = CellRay::new([og.x + off, og.y + off, og.z + off], [dg.x, dg.y, dg.z]);
     let mut cell = rays.cell_of(i);
     let mut t = rays.t[i];
     let t_end = rays.t_end[i];
     if rays.advance[i] {
         rays.advance[i] = false;
-        (t, cell) = exit_block(ou, du, cell, 0, t);
+        (t, cell) = exit_block(&ray, cell, 0, t);
     }
     loop {
         if t >= t_end || !in_range(ctx, cell) {
@@ -121,20 +134,21 @@ fn walk(
             return;
         }
         c.cells_visited += 1;
-        let candidate = match &ctx.skip {
-            Skip::Bound(b) => b.may_cross(ctx.field, cell, ctx.iso),
-            Skip::Prepared(_) => true,
+        let skip = match &ctx.skip {
+            Skip::Bound(b) => (!b.may_cross(ctx.field, cell, ctx.iso)).then_some(0),
+            Skip::Octree { tree, leaf_level } => tree.skip_level(cell, *leaf_level),
         };
-        let (t_next, next) = exit_block(ou, du, cell, 0, t);
-        if candidate {
-            rays.t[i] = t;
-            rays.seg_end[i] = t_next.min(t_end);
-            rays.set_cell(i, cell);
-            solve.push(r);
-            return;
+        match skip {
+            None => {
+                let (t_next, _) = exit_block(&ray, cell, 0, t);
+                rays.t[i] = t;
+                rays.seg_end[i] = t_next.min(t_end);
+                rays.set_cell(i, cell);
+                solve.push(r);
+                return;
+            }
+            Some(level) => (t, cell) = exit_block(&ray, cell, level, t),
         }
-        t = t_next;
-        cell = next;
     }
 }
 
@@ -200,7 +214,7 @@ mod tests {
         let mut t = 0.0;
         let mut out = vec![cell];
         loop {
-            let (tn, next) = exit_block(ou, du, cell, 0, t);
+            let (tn, next) = exit_block(&CellRay::new(ou, du), cell, 0, t);
             if tn >= t1 {
                 return out;
             }
@@ -240,7 +254,12 @@ mod tests {
 
     #[test]
     fn block_exit_skips_whole_blocks() {
-        let (t, next) = exit_block([0.5, 0.5, 0.5], [1.0, 0.25, 0.1], [0, 0, 0], 2, 0.0);
+        let (t, next) = exit_block(
+            &CellRay::new([0.5, 0.5, 0.5], [1.0, 0.25, 0.1]),
+            [0, 0, 0],
+            2,
+            0.0,
+        );
         assert_eq!(t, 3.5);
         assert_eq!(next, [4, 1, 0]);
     }

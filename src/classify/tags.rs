@@ -1,0 +1,142 @@
+//! One bit per knot cell: "may hold the iso-surface".
+
+use crate::lattice::Lattice;
+
+/// A bitset over the cells of a lattice (x fastest).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Tags {
+    pub cells: [usize; 3],
+    words: Vec<u64>,
+    count: usize,
+}
+
+impl Tags {
+    /// Packs per-cell flags (x fastest) given as consecutive byte chunks.
+    pub fn from_chunks(cells: [usize; 3], chunks: impl IntoIterator<Item = Vec<u8>>) -> Tags {
+        let n = cells.iter().product::<usize>();
+        let mut words = vec![0u64; n.div_ceil(64)];
+        let mut i = 0usize;
+        let mut count = 0;
+        for chunk in chunks {
+            for b in chunk {
+                if b != 0 {
+                    words[i >> 6] |= 1 << (i & 63);
+                    count += 1;
+                }
+                i += 1;
+            }
+        }
+        assert_eq!(i, n, "chunks must cover every cell once");
+        Tags {
+            cells,
+            words,
+            count,
+        }
+    }
+
+    /// No cell tagged.
+    pub fn empty(cells: [usize; 3]) -> Tags {
+        let n = cells.iter().product::<usize>();
+        Tags {
+            cells,
+            words: vec![0; n.div_ceil(64)],
+            count: 0,
+        }
+    }
+
+    pub fn len(&self) -> usize {
+        self.cells.iter().product()
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Number of tagged cells.
+    pub fn count(&self) -> usize {
+        self.count
+    }
+
+    #[inline(always)]
+    pub fn get_index(&self, i: usize) -> bool {
+        (self.words[i >> 6] >> (i & 63)) & 1 != 0
+    }
+
+    /// The tag of cell `c` (which must be in range).
+    #[inline(always)]
+    pub fn get(&self, c: [i64; 3]) -> bool {
+        let i = c[0] as usize + self.cells[0] * (c[1] as usize + self.cells[1] * c[2] as usize);
+        self.get_index(i)
+    }
+
+    /// True when every tag here is also set in `other`.
+    pub fn is_subset_of(&self, other: &Tags) -> bool {
+        self.cells == other.cells
+            && self
+                .words
+                .iter()
+                .zip(&other.words)
+                .all(|(a, b)| a & !b == 0)
+    }
+
+    /// Cells tagged here but not in `other`.
+    pub fn excess_over(&self, other: &Tags) -> usize {
+        self.words
+            .iter()
+            .zip(&other.words)
+            .map(|(a, b)| (a & !b).count_ones() as usize)
+            .sum()
+    }
+
+    pub fn words(&self) -> &[u64] {
+        &self.words
+    }
+
+    /// Rebuilds from raw words (cache files); `None` if the size is wrong.
+    pub fn from_words(cells: [usize; 3], words: Vec<u64>) -> Option<Tags> {
+        let n = cells.iter().product::<usize>();
+        if words.len() != n.div_ceil(64) {
+            return None;
+        }
+        let tail = n % 64;
+        if tail != 0 && words.last().is_some_and(|w| w >> tail != 0) {
+            return None;
+        }
+        let count = words.iter().map(|w| w.count_ones() as usize).sum();
+        Some(Tags {
+            cells,
+            words,
+            count,
+        })
+    }
+
+    pub fn lattice_matches(&self, lattice: &Lattice) -> bool {
+        self.cells == lattice.cells
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.words.len() * 8
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn pack_count_subset() {
+        let a = Tags::from_chunks(
+            [3, 2, 2],
+            vec![vec![1, 0, 0, 1, 0, 0], vec![0, 0, 1, 0, 0, 1]],
+        );
+        assert_eq!(a.count(), 4);
+        assert!(a.get([0, 0, 0]) && a.get([0, 1, 0]) && a.get([2, 0, 1]) && a.get([2, 1, 1]));
+        assert!(!a.get([1, 0, 0]));
+        let b = Tags::from_chunks([3, 2, 2], vec![vec![1; 12]]);
+        assert!(a.is_subset_of(&b) && !b.is_subset_of(&a));
+        assert_eq!(b.excess_over(&a), 8);
+        let w = Tags::from_words([3, 2, 2], a.words().to_vec()).unwrap();
+        assert_eq!(w, a);
+        assert!(Tags::from_words([3, 2, 2], vec![u64::MAX]).is_none());
+    }
+}

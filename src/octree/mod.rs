@@ -1,0 +1,188 @@
+//! The top-down octree over classified cells (paper section 4.1).
+//!
+//! Level `l` has one occupancy bit per aligned block of `2^l` cells per axis,
+//! set when any cell inside is tagged; level 0 is the tags themselves. A ray
+//! asks, for its current cell, for the *largest* empty block containing it —
+//! from the root down, so big empty regions are found first — and jumps to
+//! where it leaves that block in one step (see `exit_block` in the traversal
+//! stage). Below the leaf level the tree is not consulted: inside an occupied
+//! leaf the walk is a plain DDA over the cell tags. The leaf size, a traversal
+//! parameter (one tree serves every leaf size), trades tree lookups per step
+//! against cells stepped through one by one.
+
+use rayon::prelude::*;
+
+use crate::classify::Tags;
+
+/// Occupancy bits of one level.
+#[derive(Clone, Debug)]
+struct Level {
+    dims: [usize; 3],
+    words: Vec<u64>,
+}
+
+impl Level {
+    #[inline(always)]
+    fn get(&self, c: [usize; 3]) -> bool {
+        let i = c[0] + self.dims[0] * (c[1] + self.dims[1] * c[2]);
+        (self.words[i >> 6] >> (i & 63)) & 1 != 0
+    }
+
+    /// Parent level: a block is occupied if any of its 2³ children is.
+    fn coarsen(&self, occupied: impl Fn([usize; 3]) -> bool + Sync) -> Level {
+        let dims = self.dims.map(|n| n.div_ceil(2));
+        let slab = dims[0] * dims[1];
+        let flags: Vec<Vec<u8>> = (0..dims[2])
+            .into_par_iter()
+            .map(|z| {
+                let mut out = vec![0u8; slab];
+                for y in 0..dims[1] {
+                    for x in 0..dims[0] {
+                        let mut any = false;
+                        for dz in 0..2 {
+                            for dy in 0..2 {
+                                for dx in 0..2 {
+                                    let c = [2 * x + dx, 2 * y + dy, 2 * z + dz];
+                                    if c[0] < self.dims[0]
+                                        && c[1] < self.dims[1]
+                                        && c[2] < self.dims[2]
+                                    {
+                                        any |= occupied(c);
+                                    }
+                                }
+                            }
+                        }
+                        out[x + dims[0] * y] = any as u8;
+                    }
+                }
+                out
+            })
+            .collect();
+        Level::from_flags(dims, flags)
+    }
+
+    fn from_flags(dims: [usize; 3], flags: Vec<Vec<u8>>) -> Level {
+        let n = dims.iter().product::<usize>();
+        let mut words = vec![0u64; n.div_ceil(64)];
+        let mut i = 0;
+        for chunk in flags {
+            for f in chunk {
+                if f != 0 {
+                    words[i >> 6] |= 1 << (i & 63);
+                }
+                i += 1;
+            }
+        }
+        Level { dims, words }
+    }
+}
+
+/// Occupancy pyramid over cell tags.
+#[derive(Clone, Debug)]
+pub struct Octree {
+    tags: Tags,
+    /// `levels[l - 1]` is level `l` (level 0 is `tags`).
+    levels: Vec<Level>,
+}
+
+impl Octree {
+    /// Builds every level up to the root (a single block covering the lattice).
+    pub fn build(tags: Tags) -> Octree {
+        let mut levels: Vec<Level> = Vec::new();
+        let mut dims = tags.cells;
+        while dims.iter().any(|&d| d > 1) {
+            let next = match levels.last() {
+                None => {
+                    let base = Level {
+                        dims,
+                        words: Vec::new(),
+                    };
+                    let t = &tags;
+                    base.coarsen(|c| t.get([c[0] as i64, c[1] as i64, c[2] as i64]))
+                }
+                Some(prev) => prev.coarsen(|c| prev.get(c)),
+            };
+            dims = next.dims;
+            levels.push(next);
+        }
+        Octree { tags, levels }
+    }
+
+    /// Height of the tree: the root is level `top()`.
+    pub fn top(&self) -> u32 {
+        self.levels.len() as u32
+    }
+
+    pub fn tags(&self) -> &Tags {
+        &self.tags
+    }
+
+    pub fn bytes(&self) -> usize {
+        self.tags.bytes() + self.levels.iter().map(|l| l.words.len() * 8).sum::<usize>()
+    }
+
+    /// For cell `c` (in range): `None` when the cell is tagged (solve it),
+    /// else the level of the largest empty block holding it (skip that block),
+    /// searching from the root down to `leaf_level` (0 = a plain DDA).
+    #[inline]
+    pub fn skip_level(&self, c: [i64; 3], leaf_level: u32) -> Option<u32> {
+        let u = [c[0] as usize, c[1] as usize, c[2] as usize];
+        let mut l = self.top();
+        while l > leaf_level {
+            if !self.levels[(l - 1) as usize].get(u.map(|v| v >> l)) {
+                return Some(l);
+            }
+            l -= 1;
+        }
+        if self.tags.get(c) { None } else { Some(0) }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tags_with(cells: [usize; 3], on: &[[usize; 3]]) -> Tags {
+        let n = cells.iter().product::<usize>();
+        let mut flags = vec![0u8; n];
+        for c in on {
+            flags[c[0] + cells[0] * (c[1] + cells[1] * c[2])] = 1;
+        }
+        Tags::from_chunks(cells, vec![flags])
+    }
+
+    #[test]
+    fn skips_the_largest_empty_block() {
+        let t = tags_with([13, 9, 5], &[[12, 8, 4], [1, 1, 1]]);
+        let o = Octree::build(t);
+        assert_eq!(o.top(), 4);
+        assert_eq!(o.skip_level([12, 8, 4], 0), None);
+        assert_eq!(o.skip_level([1, 1, 1], 0), None);
+        assert_eq!(
+            o.skip_level([0, 0, 0], 0),
+            Some(0),
+            "neighbour of a tagged cell"
+        );
+        // (9,0,0) lies in the empty 8-block [8,16)×[0,8)×[0,8).
+        assert_eq!(o.skip_level([9, 0, 0], 0), Some(3));
+        // (5,5,3): its 4-block [4,8)×[4,8)×[0,4) is empty, its 8-block holds (1,1,1).
+        assert_eq!(o.skip_level([5, 5, 3], 0), Some(2));
+        let empty = Octree::build(Tags::empty([13, 9, 5]));
+        assert_eq!(empty.skip_level([3, 3, 3], 0), Some(4), "the root is empty");
+    }
+
+    #[test]
+    fn leaves_fall_back_to_cell_tags() {
+        let t = tags_with([16, 16, 16], &[[5, 5, 5]]);
+        let o = Octree::build(t);
+        assert_eq!(o.skip_level([5, 5, 5], 2), None);
+        assert_eq!(
+            o.skip_level([4, 4, 4], 2),
+            Some(0),
+            "same leaf: step cell by cell"
+        );
+        assert_eq!(o.skip_level([12, 12, 12], 2), Some(3));
+        // A leaf level at the root makes it a plain DDA over the tags.
+        assert_eq!(o.skip_level([12, 12, 12], o.top()), Some(0));
+    }
+}
