@@ -15,11 +15,14 @@ use crate::filter::{Field, Kernel};
 pub enum CellBound {
     /// Min/max of the coefficients (non-negative kernels).
     CoefficientRange { support: usize },
-    /// Interval products of signed weights: `lo/hi[i + S(j + S k)]`.
+    /// Interval products of signed weights: `lo/hi[i + S(j + S k)]`,
+    /// intersected with the coefficient range widened by the Lebesgue
+    /// constant `lebesgue` (per axis, cubed).
     SignedWeights {
         support: usize,
         lo: Vec<f64>,
         hi: Vec<f64>,
+        lebesgue: f64,
     },
 }
 
@@ -52,7 +55,12 @@ impl CellBound {
                 }
             }
         }
-        CellBound::SignedWeights { support: s, lo, hi }
+        CellBound::SignedWeights {
+            support: s,
+            lo,
+            hi,
+            lebesgue: kernel.lebesgue_constant().powi(3),
+        }
     }
 
     /// `[min, max]` bound of `f` over knot cell `cell` (which must be in range).
@@ -85,13 +93,19 @@ impl CellBound {
                 }
                 (mn, mx)
             }
-            CellBound::SignedWeights { lo, hi, .. } => {
+            CellBound::SignedWeights {
+                lo, hi, lebesgue, ..
+            } => {
                 let (mut low, mut high) = (0.0, 0.0);
+                let (mut cmin, mut cmax) = (f64::INFINITY, f64::NEG_INFINITY);
                 for k in 0..s {
                     for j in 0..s {
                         let row = &data[base + j * sy + k * sz..][..s];
                         for (i, c) in row.iter().enumerate() {
-                            let d = c.to_f64() - iso;
+                            let c = c.to_f64();
+                            cmin = cmin.min(c);
+                            cmax = cmax.max(c);
+                            let d = c - iso;
                             let w = i + s * (j + s * k);
                             if d >= 0.0 {
                                 low += d * lo[w];
@@ -103,7 +117,11 @@ impl CellBound {
                         }
                     }
                 }
-                (iso + low, iso + high)
+                let (mid, half) = (0.5 * (cmin + cmax), 0.5 * (cmax - cmin));
+                (
+                    (iso + low).max(mid - lebesgue * half),
+                    (iso + high).min(mid + lebesgue * half),
+                )
             }
         }
     }

@@ -144,20 +144,22 @@ fn slack(field: &Field) -> f64 {
 
 /// The cheapest valid candidate set: BMCC for non-negative kernels (the Bézier
 /// coefficients are convex combinations of the support, so they cannot leave
-/// its range), the signed ACCC bound otherwise.
+/// its range), the Lebesgue range otherwise.
 fn prefilter_candidates(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
     if field.kernel().is_nonnegative() {
         bmcc(field, lattice, iso)
     } else {
-        accc(field, lattice, iso)
+        lebesgue_range(field, lattice, iso)
     }
 }
 
 /// Binary morphological classification: the support holds coefficients on
-/// both sides (`> iso` and `<= iso`).
+/// both sides (`> iso` and `<= iso`). For kernels with negative lobes, where
+/// that is not a bound, the support's coefficient range widened by the
+/// kernel's Lebesgue constant ([`lebesgue_range`]) takes its place.
 pub fn bmcc(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
     if !field.kernel().is_nonnegative() {
-        return signed_direct(field, lattice, iso);
+        return lebesgue_range(field, lattice, iso);
     }
     separable::per_cell(
         field,
@@ -183,9 +185,10 @@ pub fn accc(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
             (hi, lo.max(0.0))
         })
         .unzip();
-    let eps = slack(field);
-    // Channels: d+·M, d+·m, d-·M, d-·m.
-    separable::per_cell(
+    // Channels: d+·M, d+·m, d-·M, d-·m. The slack that absorbs summation
+    // rounding scales with the terms summed, so a bound that is exactly iso
+    // (e.g. trilinear, whose minimum weights are 0) stays exact.
+    let tags = separable::per_cell(
         field,
         lattice,
         |c| {
@@ -206,31 +209,56 @@ pub fn accc(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
         |v| {
             let upper = v[0] + v[3];
             let lower = v[1] + v[2];
+            let e_up = 1e-12 * (v[0].abs() + v[3].abs());
+            let e_lo = 1e-12 * (v[1].abs() + v[2].abs());
             // Some point may exceed iso, and some point may not.
-            upper > -eps && lower <= eps
+            upper > e_up && lower <= e_lo
+        },
+    );
+    // Where a weight's minimum over the cell is 0 (trilinear), eq. (1) cannot
+    // exclude a cell whose coefficients all lie on one side: intersect with
+    // BMCC, which can.
+    if mn.contains(&0.0) {
+        tags.and(&bmcc(field, lattice, iso))
+    } else {
+        tags
+    }
+}
+
+/// The coefficient range `[lo, hi]` of the support widened about its middle
+/// by the kernel's Lebesgue constant `L` (separable min/max windows): since
+/// the weights sum to one, `|f - mid| <= Σ|c - mid||w| <= L·(hi - lo)/2`.
+/// Valid for any kernel; for non-negative ones `L = 1` and it is BMCC's range.
+pub fn lebesgue_range(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
+    let l = field.kernel().lebesgue_constant().powi(3);
+    separable::per_cell(
+        field,
+        lattice,
+        |c| [c, c],
+        |w| {
+            w.iter().fold([f64::INFINITY, f64::NEG_INFINITY], |a, b| {
+                [a[0].min(b[0]), a[1].max(b[1])]
+            })
+        },
+        |v| {
+            let (mid, half) = (0.5 * (v[0] + v[1]), 0.5 * (v[1] - v[0]));
+            let eps = 1e-12 * (mid.abs() + half + iso.abs());
+            mid + l * half > iso - eps && mid - l * half <= iso + eps
         },
     )
 }
 
-/// Cell-by-cell signed-weight interval bound (Catmull-Rom).
+/// Signed kernels: the Lebesgue range, refined cell by cell with the
+/// signed-weight interval bound of [`CellBound`]; both are valid, so is their
+/// intersection.
 fn signed_direct(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
+    let coarse = lebesgue_range(field, lattice, iso);
     let b = CellBound::new(field.kernel());
     let eps = slack(field);
-    let [nx, ny, nz] = lattice.cells;
-    let chunks: Vec<Vec<u8>> = (0..nz)
-        .into_par_iter()
-        .map(|z| {
-            let mut out = vec![0u8; nx * ny];
-            for y in 0..ny {
-                for x in 0..nx {
-                    let (lo, hi) = b.range(field, [x as i64, y as i64, z as i64], iso);
-                    out[x + nx * y] = (lo <= iso + eps && hi > iso - eps) as u8;
-                }
-            }
-            out
-        })
-        .collect();
-    Tags::from_chunks(lattice.cells, chunks)
+    refine_cells(lattice, &coarse, |cell| {
+        let (lo, hi) = b.range(field, cell, iso);
+        lo <= iso + eps && hi > iso - eps
+    })
 }
 
 /// ACCC per `n³` sub-cells, for the cells `coarse` tagged: a cell stays tagged
@@ -248,38 +276,38 @@ pub fn accc_sub(field: &Field, lattice: &Lattice, iso: f64, coarse: &Tags, n: us
                 .collect()
         })
         .collect();
-    let eps = slack(field);
-    refine_cells(lattice, coarse, |cell| {
-        let d = support_minus_iso(field, cell, iso);
-        for az in 0..n {
-            for ay in 0..n {
-                for ax in 0..n {
-                    let (mut lo, mut hi) = (0.0, 0.0);
-                    for k in 0..s {
-                        let rz = ranges[az][k];
-                        for j in 0..s {
-                            let ry = ranges[ay][j];
-                            for i in 0..s {
-                                let rx = ranges[ax][i];
-                                let (pl, ph) = interval_product(rx, ry, rz);
-                                let v = d[i + s * (j + s * k)];
-                                if v >= 0.0 {
-                                    lo += v * pl;
-                                    hi += v * ph;
-                                } else {
-                                    lo += v * ph;
-                                    hi += v * pl;
-                                }
-                            }
-                        }
-                    }
-                    if lo <= eps && hi > -eps {
-                        return true;
-                    }
+    // The weight-product interval of every support term in every sub-cell
+    // does not depend on the cell: tabulate it once.
+    let s3 = s * s * s;
+    let mut table = vec![(0.0, 0.0); n * n * n * s3];
+    for sub in 0..n * n * n {
+        let (ax, ay, az) = (sub % n, sub / n % n, sub / (n * n));
+        for k in 0..s {
+            for j in 0..s {
+                for i in 0..s {
+                    table[sub * s3 + i + s * (j + s * k)] =
+                        interval_product(ranges[ax][i], ranges[ay][j], ranges[az][k]);
                 }
             }
         }
-        false
+    }
+    refine_cells(lattice, coarse, |cell| {
+        let d = support_minus_iso(field, cell, iso);
+        table.chunks_exact(s3).any(|sub| {
+            let (mut lo, mut hi, mut mag) = (0.0, 0.0, 0.0);
+            for (v, &(pl, ph)) in d.iter().zip(sub) {
+                if *v >= 0.0 {
+                    lo += v * pl;
+                    hi += v * ph;
+                } else {
+                    lo += v * ph;
+                    hi += v * pl;
+                }
+                mag += v.abs() * ph.abs().max(pl.abs());
+            }
+            let eps = 1e-12 * mag;
+            lo <= eps && hi > -eps
+        })
     })
 }
 

@@ -79,6 +79,23 @@ impl Tags {
                 .all(|(a, b)| a & !b == 0)
     }
 
+    /// Cells tagged in both (the intersection of two valid bounds is valid).
+    pub fn and(&self, other: &Tags) -> Tags {
+        assert_eq!(self.cells, other.cells);
+        let words: Vec<u64> = self
+            .words
+            .iter()
+            .zip(&other.words)
+            .map(|(a, b)| a & b)
+            .collect();
+        let count = words.iter().map(|w| w.count_ones() as usize).sum();
+        Tags {
+            cells: self.cells,
+            words,
+            count,
+        }
+    }
+
     /// Cells tagged here but not in `other`.
     pub fn excess_over(&self, other: &Tags) -> usize {
         self.words

@@ -1,5 +1,6 @@
 //! Subcommands; each module turns parsed arguments into library calls.
 
+mod classify;
 mod common;
 mod compare;
 mod info;
@@ -39,6 +40,8 @@ enum Command {
     Reference(reference::Args),
     /// Compare two hit-position EXRs: hit-error percentiles, validity and event mismatches.
     Compare(compare::Args),
+    /// Count the cells each classification method tags (BMCC, ACCC, Bezier, exact).
+    Classify(classify::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -49,5 +52,6 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Render(a) => render::run(a),
         Command::Reference(a) => reference::run(a),
         Command::Compare(a) => compare::run(a),
+        Command::Classify(a) => classify::run(a),
     }
 }

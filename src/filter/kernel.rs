@@ -158,6 +158,25 @@ impl Kernel {
         horner(self.weight_poly(j), t)
     }
 
+    /// `max_t Σ_j |W_j(t)|` per axis (1 for non-negative kernels, 1.25 for
+    /// Catmull-Rom), slightly rounded up: how far `f` can overshoot the range
+    /// of its coefficients. Sampled finely; the sum of absolute weights is
+    /// piecewise polynomial, so a margin of 1e-6 covers the sampling.
+    pub fn lebesgue_constant(&self) -> f64 {
+        if self.nonnegative {
+            return 1.0;
+        }
+        let mut m = 0.0f64;
+        for i in 0..=4096 {
+            let t = i as f64 / 4096.0;
+            let sum: f64 = (0..self.support)
+                .map(|j| horner(self.weight_poly(j), t).abs())
+                .sum();
+            m = m.max(sum);
+        }
+        m + 1e-6
+    }
+
     /// Exact range `[min, max]` of `W_j(t)` for `t ∈ [t0, t1]`, from the end
     /// points and every interior critical point (roots of `W_j'`, located by
     /// sign changes on a fine grid and bisection). Widened by a few ulps so

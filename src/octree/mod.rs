@@ -2,10 +2,12 @@
 //!
 //! Level `l` has one occupancy bit per aligned block of `2^l` cells per axis,
 //! set when any cell inside is tagged; level 0 is the tags themselves. A ray
-//! asks, for its current cell, for the *largest* empty block containing it —
-//! from the root down, so big empty regions are found first — and jumps to
-//! where it leaves that block in one step (see `exit_block` in the traversal
-//! stage). Below the leaf level the tree is not consulted: inside an occupied
+//! asks, for its current cell, for the *largest* empty block containing it,
+//! and jumps to where it leaves that block in one step (see `exit_block` in
+//! the traversal stage), so big empty regions cost one step. The paper
+//! descends from the root; the answer (the largest empty ancestor) is the
+//! same climbing from the cell, which costs one probe for the tagged cells
+//! where most visits happen, so [`Octree::skip_level`] climbs. Below the leaf level the tree is not consulted: inside an occupied
 //! leaf the walk is a plain DDA over the cell tags. The leaf size, a traversal
 //! parameter (one tree serves every leaf size), trades tree lookups per step
 //! against cells stepped through one by one.
@@ -122,19 +124,26 @@ impl Octree {
     }
 
     /// For cell `c` (in range): `None` when the cell is tagged (solve it),
-    /// else the level of the largest empty block holding it (skip that block),
-    /// searching from the root down to `leaf_level` (0 = a plain DDA).
+    /// else the level of the largest empty block holding it (skip that block).
+    /// Blocks below `leaf_level` are not used: inside an occupied leaf the walk
+    /// steps cell by cell (`leaf_level = top()` makes it a plain DDA).
     #[inline]
     pub fn skip_level(&self, c: [i64; 3], leaf_level: u32) -> Option<u32> {
-        let u = [c[0] as usize, c[1] as usize, c[2] as usize];
-        let mut l = self.top();
-        while l > leaf_level {
-            if !self.levels[(l - 1) as usize].get(u.map(|v| v >> l)) {
-                return Some(l);
-            }
-            l -= 1;
+        if self.tags.get(c) {
+            return None;
         }
-        if self.tags.get(c) { None } else { Some(0) }
+        let u = [c[0] as usize, c[1] as usize, c[2] as usize];
+        // The leaf holding the cell must be empty to skip more than the cell.
+        let top = self.top();
+        let first = leaf_level.max(1);
+        if first > top || self.levels[(first - 1) as usize].get(u.map(|v| v >> first)) {
+            return Some(0);
+        }
+        let mut l = first;
+        while l < top && !self.levels[l as usize].get(u.map(|v| v >> (l + 1))) {
+            l += 1;
+        }
+        Some(l)
     }
 }
 

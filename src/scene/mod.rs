@@ -23,7 +23,7 @@ use crate::phantom::PhantomSpec;
 use crate::volume::{Endian, LoadOptions, RawSpec, SampleType, Volume, VolumeError};
 
 /// Classification the octree uses when the scene names none.
-pub const DEFAULT_OCTREE_CLASSIFY: Method = Method::Accc;
+pub const DEFAULT_OCTREE_CLASSIFY: Method = Method::Bezier(2);
 
 /// Largest image side accepted (and 2^28 pixels in all).
 pub const MAX_IMAGE_SIDE: u32 = 32768;

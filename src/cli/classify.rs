@@ -1,0 +1,136 @@
+//! `snell classify`: how many cells each classification method tags, how that
+//! compares with the paper's Table 3 (ACCC/BMCC), and how far each is from
+//! the proven crossings.
+
+use std::path::PathBuf;
+
+use anyhow::Context;
+use clap::Args as ClapArgs;
+
+use snell::classify::{self, Method};
+use snell::filter::{Field, FilterKind};
+use snell::lattice::Lattice;
+
+use super::common::VolumeArgs;
+
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// Volume file.
+    pub volume: PathBuf,
+    /// Reconstruction filter.
+    #[arg(long)]
+    pub filter: String,
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
+    pub lambda: f64,
+    /// Iso-value (in the volume's units).
+    #[arg(long, allow_negative_numbers = true)]
+    pub iso: f64,
+    /// Methods to run, comma-separated (default: all).
+    #[arg(long, value_delimiter = ',')]
+    pub methods: Vec<String>,
+    /// Print one JSON object instead of a table.
+    #[arg(long)]
+    pub json: bool,
+    #[command(flatten)]
+    pub vol: VolumeArgs,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let kind = FilterKind::parse(&a.filter, a.lambda).context("--filter")?;
+    anyhow::ensure!(a.iso.is_finite(), "--iso must be finite");
+    let methods: Vec<Method> = if a.methods.is_empty() {
+        Method::all().to_vec()
+    } else {
+        a.methods
+            .iter()
+            .map(|m| Method::parse(m).with_context(|| format!("--methods: unknown method '{m}'")))
+            .collect::<anyhow::Result<_>>()?
+    };
+    let vol = a.vol.load(&a.volume)?;
+    let start = std::time::Instant::now();
+    let field = Field::new(&vol, kind);
+    let prefilter_s = start.elapsed().as_secs_f64();
+    let lattice = Lattice::new(field.kernel(), field.dims());
+    let iso = field.separating_iso(a.iso);
+    let results: Vec<classify::Classification> = methods
+        .iter()
+        .map(|&m| classify::classify(&field, iso, m))
+        .collect();
+    let count = |m: Method| {
+        results
+            .iter()
+            .find(|r| r.method == m)
+            .map(|r| r.tags.count())
+    };
+    let exact = results.iter().find(|r| r.method == Method::Exact);
+    let bmcc = count(Method::Bmcc);
+    let total = lattice.cell_count();
+    let rows: Vec<serde_json::Value> = results
+        .iter()
+        .map(|r| {
+            let n = r.tags.count();
+            serde_json::json!({
+                "method": r.method.name(),
+                "tagged": n,
+                "fraction": n as f64 / total.max(1) as f64,
+                "ratio_to_bmcc": bmcc.map(|b| n as f64 / b.max(1) as f64),
+                "excess_over_exact": exact.map(|e| r.tags.excess_over(&e.tags)),
+                "contains_exact": exact.map(|e| e.tags.is_subset_of(&r.tags)),
+                "seconds": r.seconds,
+            })
+        })
+        .collect();
+    if a.json {
+        let j = serde_json::json!({
+            "volume": a.volume.display().to_string(),
+            "filter": kind.to_string(),
+            "iso": a.iso,
+            "cells": total,
+            "lattice": lattice.cells,
+            "prefilter_s": prefilter_s,
+            "methods": rows,
+            "accc_over_bmcc": match (count(Method::Accc), bmcc) { (Some(x), Some(b)) => Some(x as f64 / b.max(1) as f64), _ => None },
+        });
+        println!("{j}");
+        return Ok(());
+    }
+    println!(
+        "{} — {} at iso {} — {} knot cells ({}x{}x{}), prefilter {:.1} ms",
+        a.volume.display(),
+        kind,
+        a.iso,
+        total,
+        lattice.cells[0],
+        lattice.cells[1],
+        lattice.cells[2],
+        prefilter_s * 1e3
+    );
+    println!(
+        "{:10} {:>12} {:>9} {:>9} {:>14} {:>10}",
+        "method", "tagged", "of cells", "vs bmcc", "over exact", "time ms"
+    );
+    for (r, j) in results.iter().zip(&rows) {
+        let fmt_opt = |v: &serde_json::Value, pct: bool| match v.as_f64() {
+            Some(x) if pct => format!("{:.1}%", 100.0 * x),
+            Some(x) => format!("{x}"),
+            None => "-".into(),
+        };
+        println!(
+            "{:10} {:>12} {:>9} {:>9} {:>14} {:>10.1}",
+            r.method.name(),
+            r.tags.count(),
+            fmt_opt(&j["fraction"], true),
+            fmt_opt(&j["ratio_to_bmcc"], true),
+            fmt_opt(&j["excess_over_exact"], false),
+            r.seconds * 1e3
+        );
+    }
+    if let Some(e) = exact {
+        let all_contain = results.iter().all(|r| e.tags.is_subset_of(&r.tags));
+        println!(
+            "exact ⊆ every method: {}",
+            if all_contain { "yes" } else { "NO" }
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,204 @@
+//! Classification and the octree: conservative on phantoms and real data, and
+//! invisible in the output (octree renders land where cell-by-cell DDA with no
+//! classification lands).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+
+use snell::classify::{self, Method};
+use snell::filter::{Field, FilterKind};
+use snell::phantom::{Hole, MarschnerLobbSpec, PhantomFormat, SphereSpec};
+use snell::prepare::Prepared;
+use snell::render;
+use snell::scene::Scene;
+use snell::volume::{self, LoadOptions, Volume};
+
+fn data(name: &str) -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+        .join("../shared/data")
+        .join(name)
+}
+
+fn real(name: &str) -> Volume {
+    volume::load(&data(name), &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"))
+}
+
+/// Every conservative method contains the proven crossings, and the methods
+/// nest as they should.
+fn check_conservative(what: &str, vol: &Volume, filter: &str, iso: f64, methods: &[Method]) {
+    let field = Field::new(vol, FilterKind::parse(filter, 1.0).unwrap());
+    let iso = field.separating_iso(iso);
+    let exact = classify::classify(&field, iso, Method::Exact).tags;
+    assert!(exact.count() > 0, "{what}: the surface exists");
+    let mut counts = Vec::new();
+    for &m in methods {
+        let t = classify::classify(&field, iso, m).tags;
+        assert!(
+            exact.is_subset_of(&t),
+            "{what} {filter}: exact ⊄ {}",
+            m.name()
+        );
+        counts.push((m.name(), t.count()));
+    }
+    eprintln!("{what} {filter}: exact {} | {counts:?}", exact.count());
+}
+
+#[test]
+fn conservative_on_phantoms() {
+    let all = [
+        Method::Bmcc,
+        Method::Accc,
+        Method::AcccSub(2),
+        Method::AcccSub(4),
+        Method::Bezier(0),
+        Method::Bezier(2),
+    ];
+    let sphere = SphereSpec {
+        format: PhantomFormat::U8,
+        ..Default::default()
+    }
+    .build()
+    .unwrap();
+    let holes = SphereSpec {
+        format: PhantomFormat::U8,
+        holes: vec![
+            Hole {
+                center: [37.5, 37.5, 31.5],
+                radius: 5.0,
+                sigma: 1.5,
+            },
+            Hole {
+                center: [25.5, 25.5, 31.5],
+                radius: 5.0,
+                sigma: 1.5,
+            },
+        ],
+        ..Default::default()
+    }
+    .build()
+    .unwrap();
+    let ml = MarschnerLobbSpec::default().build().unwrap();
+    for filter in [
+        "linear",
+        "catmull-rom",
+        "bspline2",
+        "bspline3",
+        "bspline6",
+        "smooth-bspline3",
+    ] {
+        check_conservative("sphere", &sphere, filter, 127.5, &all);
+        check_conservative("two holes", &holes, filter, 127.5, &all);
+        check_conservative("marschner-lobb", &ml, filter, 0.5, &all);
+    }
+}
+
+#[test]
+fn conservative_on_real_volumes() {
+    let quick = [
+        Method::Bmcc,
+        Method::Accc,
+        Method::AcccSub(2),
+        Method::Bezier(2),
+    ];
+    for (name, iso) in [
+        ("tooth.nrrd", 120.0),
+        ("lobster.nrrd", 35.0),
+        ("cranium-ct.nrrd", 524.0),
+    ] {
+        let vol = real(name);
+        for filter in ["bspline3", "catmull-rom"] {
+            check_conservative(name, &vol, filter, iso, &quick);
+        }
+    }
+}
+
+fn hits_agree(scene: &Scene, vol: Arc<Volume>, variants: &[&[&str]]) {
+    let base = render::render(
+        scene,
+        &Prepared::new(vol.clone(), scene.surface.filter),
+        None,
+    );
+    assert_eq!(base.stats.counters.undefined, 0);
+    for v in variants {
+        let o: Vec<String> = v.iter().map(|s| s.to_string()).collect();
+        let mut s = scene.clone();
+        let parsed = Scene::parse(
+            &std::fs::read_to_string(&scene.path).unwrap(),
+            &scene.path,
+            &o.iter().cloned().chain(size_of(scene)).collect::<Vec<_>>(),
+        )
+        .unwrap();
+        s.render = parsed.render;
+        let method = s.render.classify.unwrap();
+        let prep = Prepared::new(vol.clone(), s.surface.filter).with_accel(s.surface.iso, method);
+        let f = render::render(&s, &prep, None);
+        let mut worst = 0.0f64;
+        for i in 0..f.film.u.len() {
+            let (a, b) = ((base.film.u[i], base.film.v[i]), (f.film.u[i], f.film.v[i]));
+            assert_eq!(
+                a.0.is_nan(),
+                b.0.is_nan(),
+                "{v:?}: validity differs at pixel {i}"
+            );
+            assert_eq!(
+                base.film.events[i], f.film.events[i],
+                "{v:?}: events differ at pixel {i}"
+            );
+            if !a.0.is_nan() {
+                worst = worst.max((a.0 - b.0).abs().max((a.1 - b.1).abs()) as f64);
+            }
+        }
+        eprintln!(
+            "{}: {v:?} worst hit difference {worst:.2e}",
+            scene.path.display()
+        );
+        assert!(worst <= 1e-5, "{v:?}: hits differ by {worst}");
+        // BMCC is the on-the-fly coefficient bound, precomputed: never more.
+        assert!(
+            f.stats.counters.cells_solved <= base.stats.counters.cells_solved,
+            "classification never solves more cells"
+        );
+    }
+}
+
+fn size_of(s: &Scene) -> Vec<String> {
+    vec![
+        format!("image.width={}", s.width),
+        format!("image.height={}", s.height),
+    ]
+}
+
+const VARIANTS: [&[&str]; 5] = [
+    &["render.traversal=dda", "render.classify=bmcc"],
+    &["render.traversal=dda", "render.classify=accc"],
+    &["render.traversal=octree", "render.classify=accc"],
+    &[
+        "render.traversal=octree",
+        "render.classify=bezier",
+        "render.leaf=1",
+    ],
+    &[
+        "render.traversal=octree",
+        "render.classify=accc2",
+        "render.leaf=8",
+    ],
+];
+
+#[test]
+fn octree_renders_match_unclassified_dda() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let small = ["image.width=96", "image.height=96"].map(String::from);
+    for name in ["sphere.toml", "ball-two-holes.toml"] {
+        let scene = Scene::load(&dir.join(name), &small).unwrap();
+        let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
+        hits_agree(&scene, vol, &VARIANTS);
+    }
+    // A real volume with Catmull-Rom (signed bound) and the smoothing spline.
+    for filter in ["catmull-rom", "smooth-bspline3"] {
+        let mut o = small.to_vec();
+        o.push(format!("surface.filter={filter}"));
+        let scene = Scene::load(&dir.join("lobster.toml"), &o).unwrap();
+        let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
+        hits_agree(&scene, vol, &VARIANTS[2..4]);
+    }
+}
