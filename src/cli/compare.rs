@@ -1,47 +1,79 @@
-//! `snell compare`: hit-error statistics between two hit-position EXRs.
+//! `snell compare`: two hit-position EXRs (hit-error statistics) or two images
+//! (RMSE, PSNR, SSIM, and an error image on request).
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use clap::Args as ClapArgs;
 
 use snell::compare::compare_hits;
 use snell::film::HitImage;
+use snell::film::metrics::{RgbImage, compare_images, diff_image};
 use snell::scene::Scene;
+
+use super::common::check_output;
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
-    /// Hit-position EXR to assess.
+    /// Image or hit-position EXR to assess.
     pub a: PathBuf,
-    /// Hit-position EXR to compare against (e.g. from `snell reference`).
+    /// Reference to compare against (e.g. from `snell reference`, or a 16×16 supersampled render).
     pub b: PathBuf,
-    /// Checker square size, to report errors in squares.
+    /// Checker square size, to report hit errors in squares.
     #[arg(long)]
     pub checker: Option<f64>,
     /// Take the checker size from this scene file.
     #[arg(long)]
     pub scene: Option<PathBuf>,
+    /// Write a heat map of the per-pixel colour difference (images only).
+    #[arg(long, value_name = "DIFF.png")]
+    pub diff: Option<PathBuf>,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
 }
 
+fn is_hit_image(p: &Path) -> bool {
+    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) && HitImage::read_exr(p).is_ok()
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let checker = match (&a.checker, &a.scene) {
-        (Some(c), _) => Some(*c),
-        (None, Some(s)) => Scene::load(s, &[])?.checker_size(),
-        (None, None) => None,
-    };
-    if let Some(c) = checker {
-        anyhow::ensure!(c.is_finite() && c > 0.0, "--checker must be > 0, got {c}");
+    if let Some(d) = &a.diff {
+        check_output(d)?;
     }
-    let ha = HitImage::read_exr(&a.a)?;
-    let hb = HitImage::read_exr(&a.b)?;
-    let c = compare_hits(&ha, &hb, checker)
+    if is_hit_image(&a.a) && is_hit_image(&a.b) {
+        let checker = match (&a.checker, &a.scene) {
+            (Some(c), _) => Some(*c),
+            (None, Some(s)) => Scene::load(s, &[])?.checker_size(),
+            (None, None) => None,
+        };
+        if let Some(c) = checker {
+            anyhow::ensure!(c.is_finite() && c > 0.0, "--checker must be > 0, got {c}");
+        }
+        let ha = HitImage::read_exr(&a.a)?;
+        let hb = HitImage::read_exr(&a.b)?;
+        let c = compare_hits(&ha, &hb, checker)
+            .map_err(|e| anyhow::anyhow!("{} vs {}: {e}", a.a.display(), a.b.display()))?;
+        if a.json {
+            println!("{}", c.to_json());
+        } else {
+            print!("{}", c.table());
+        }
+        return Ok(());
+    }
+    let ia = RgbImage::read(&a.a)?;
+    let ib = RgbImage::read(&a.b)?;
+    let c = compare_images(&ia, &ib)
         .map_err(|e| anyhow::anyhow!("{} vs {}: {e}", a.a.display(), a.b.display()))?;
+    if let Some(d) = &a.diff {
+        snell::film::write_png_rgb(d, ia.width, ia.height, &diff_image(&ia, &ib))?;
+    }
     if a.json {
-        println!("{}", c.to_json());
+        println!("{}", serde_json::to_value(c)?);
     } else {
-        print!("{}", c.table());
+        println!(
+            "RMSE {:.5}  PSNR {:.2} dB  SSIM {:.4}  max |diff| {:.4}",
+            c.rmse, c.psnr, c.ssim, c.max_abs
+        );
     }
     Ok(())
 }

@@ -7,6 +7,9 @@
 //!
 //! Every file is written atomically (see [`crate::atomic`]).
 
+pub mod metrics;
+pub mod prss;
+
 use std::path::{Path, PathBuf};
 
 use exr::prelude::{
@@ -15,7 +18,7 @@ use exr::prelude::{
 };
 
 use crate::atomic::write_atomic;
-use crate::render::tile::TileOut;
+use crate::render::tile::{Region, TileOut};
 
 #[derive(Debug, thiserror::Error)]
 pub enum FilmError {
@@ -59,16 +62,34 @@ impl Film {
         }
     }
 
-    /// Copies a tile's results into place.
-    pub fn blit(&mut self, t: &TileOut) {
-        let tw = t.tile.width() as usize;
-        for row in 0..t.tile.height() as usize {
-            let src = row * tw;
-            let dst = (t.tile.y0 as usize + row) * self.width as usize + t.tile.x0 as usize;
-            self.u[dst..dst + tw].copy_from_slice(&t.u[src..src + tw]);
-            self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
-            self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
-            self.color[dst..dst + tw].copy_from_slice(&t.color[src..src + tw]);
+    /// Copies a tile's results into place (hit positions only where the tile
+    /// traced pixel-centre rays).
+    pub fn blit(&mut self, t: &TileOut, with_hits: bool) {
+        match &t.region {
+            Region::Rect(tile) => {
+                let tw = tile.width() as usize;
+                for row in 0..tile.height() as usize {
+                    let src = row * tw;
+                    let dst = (tile.y0 as usize + row) * self.width as usize + tile.x0 as usize;
+                    if with_hits {
+                        self.u[dst..dst + tw].copy_from_slice(&t.u[src..src + tw]);
+                        self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
+                        self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
+                    }
+                    self.color[dst..dst + tw].copy_from_slice(&t.color[src..src + tw]);
+                }
+            }
+            Region::List(pixels) => {
+                for (k, &p) in pixels.iter().enumerate() {
+                    let p = p as usize;
+                    if with_hits {
+                        self.u[p] = t.u[k];
+                        self.v[p] = t.v[k];
+                        self.events[p] = t.events[k];
+                    }
+                    self.color[p] = t.color[k];
+                }
+            }
         }
     }
 

@@ -27,11 +27,12 @@ use rayon::prelude::*;
 pub use context::Ctx;
 pub use stats::{Counters, PrepareTimes, RenderStats};
 
-use crate::film::Film;
+use crate::film::{Film, prss};
 pub use crate::prepare::Prepared;
-use crate::scene::{Scene, SceneError};
+use crate::scene::{Scene, SceneError, Supersampling};
 use crate::volume::LoadOptions;
 use crate::with_support;
+use tile::{Region, Sampling};
 
 /// Loads, prepares and renders a scene in one call (on the current rayon pool).
 pub fn render_scene(scene: &Scene) -> Result<Frame, SceneError> {
@@ -47,22 +48,30 @@ pub struct Frame {
 
 /// Renders `scene` with `prep` on the current rayon pool. `progress`, when
 /// given, counts finished tiles (for a progress bar).
+///
+/// Real supersampling traces `n×n` rays per pixel in the tile pass. PRSS and
+/// footprint filtering trace only pixel-centre rays, then colour the film from
+/// the hit positions in a final stage; with the `trace` fallback, the pixels it
+/// cannot interpolate get real sub-pixel rays in a second, adaptive pass.
 pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) -> Frame {
     let ctx = Ctx::new(scene, prep);
-    let tiles = tile::tiles(scene.width, scene.height, scene.render.tile);
-    let start = Instant::now();
-    let outs: Vec<tile::TileOut> = tiles
-        .par_iter()
-        .map_init(Bump::new, |bump, &t| {
-            bump.reset();
-            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S>(&ctx, t, bump));
-            if let Some(p) = progress {
-                p.fetch_add(1, Ordering::Relaxed);
-            }
-            out
-        })
+    let rs = &scene.render;
+    let n = rs.samples;
+    let first = match rs.supersampling {
+        Supersampling::None | Supersampling::Prss | Supersampling::Footprint => Sampling::Centre,
+        Supersampling::Grid => Sampling::Grid { n, centre: true },
+        Supersampling::Jitter => Sampling::Jitter {
+            n,
+            seed: rs.seed,
+            centre: true,
+        },
+    };
+    let regions: Vec<Region> = tile::tiles(scene.width, scene.height, rs.tile)
+        .into_iter()
+        .map(Region::Rect)
         .collect();
-    let film_start = Instant::now();
+    let start = Instant::now();
+    let outs = trace_regions(&ctx, regions, first, progress);
     let mut film = Film::new(scene.width, scene.height);
     let mut stats = RenderStats {
         threads: rayon::current_num_threads(),
@@ -71,14 +80,72 @@ pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) ->
         prepare: prep.times,
         ..Default::default()
     };
-    for o in &outs {
-        film.blit(o);
+    let film_start = Instant::now();
+    absorb(&mut film, &mut stats, &outs, true);
+    let mut film_time = film_start.elapsed();
+
+    let post_mode = match rs.supersampling {
+        Supersampling::Prss => Some(prss::Mode::Prss),
+        Supersampling::Footprint => Some(prss::Mode::Footprint),
+        _ => None,
+    };
+    if let Some(mode) = post_mode {
+        let post_start = Instant::now();
+        let settings = prss::PostSettings {
+            mode,
+            samples: n,
+            ring: rs.prss_ring,
+            fallback: rs.prss_fallback,
+        };
+        let post = prss::shade(&film, &scene.backdrop, scene.background, &settings);
+        film.color = post.color;
+        stats.post = Some(post.stats);
+        stats
+            .stage_times
+            .add(stats::Stage::Prss, post_start.elapsed());
+        if !post.flagged.is_empty() {
+            stats.retraced_pixels = post.flagged.len() as u64;
+            let regions: Vec<Region> = post
+                .flagged
+                .chunks((rs.tile * rs.tile) as usize)
+                .map(|c| Region::List(c.to_vec()))
+                .collect();
+            let outs = trace_regions(&ctx, regions, Sampling::Grid { n, centre: false }, None);
+            let t = Instant::now();
+            absorb(&mut film, &mut stats, &outs, false);
+            film_time += t.elapsed();
+        }
+    }
+    stats.stage_times.add(stats::Stage::Film, film_time);
+    stats.wall = start.elapsed();
+    Frame { film, stats }
+}
+
+/// Traces regions in parallel; results come back in region order.
+fn trace_regions(
+    ctx: &Ctx,
+    regions: Vec<Region>,
+    sampling: Sampling,
+    progress: Option<&AtomicUsize>,
+) -> Vec<tile::TileOut> {
+    regions
+        .into_par_iter()
+        .map_init(Bump::new, |bump, region| {
+            bump.reset();
+            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S>(ctx, region, sampling, bump));
+            if let Some(p) = progress {
+                p.fetch_add(1, Ordering::Relaxed);
+            }
+            out
+        })
+        .collect()
+}
+
+/// Folds tile outputs into the film and the stats, in region order.
+fn absorb(film: &mut Film, stats: &mut RenderStats, outs: &[tile::TileOut], with_hits: bool) {
+    for o in outs {
+        film.blit(o, with_hits);
         stats.counters.add(&o.counters);
         stats.stage_times.merge(&o.times);
     }
-    stats
-        .stage_times
-        .add(stats::Stage::Film, film_start.elapsed());
-    stats.wall = start.elapsed();
-    Frame { film, stats }
 }

@@ -17,16 +17,19 @@ pub enum Stage {
     Solve = 3,
     Refract = 4,
     Record = 5,
-    Film = 6,
+    /// Anti-aliasing from the hit-position image (PRSS, footprint).
+    Prss = 6,
+    Film = 7,
 }
 
-pub const STAGES: [Stage; 7] = [
+pub const STAGES: [Stage; 8] = [
     Stage::Generate,
     Stage::Entry,
     Stage::Traverse,
     Stage::Solve,
     Stage::Refract,
     Stage::Record,
+    Stage::Prss,
     Stage::Film,
 ];
 
@@ -39,6 +42,7 @@ impl Stage {
             Stage::Solve => "solve",
             Stage::Refract => "refract",
             Stage::Record => "record",
+            Stage::Prss => "prss",
             Stage::Film => "film",
         }
     }
@@ -98,7 +102,7 @@ impl Counters {
 
 /// Time spent per stage.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
-pub struct StageTimes(pub [Duration; 7]);
+pub struct StageTimes(pub [Duration; 8]);
 
 impl StageTimes {
     #[inline]
@@ -130,6 +134,10 @@ pub struct RenderStats {
     pub threads: usize,
     pub width: u32,
     pub height: u32,
+    /// What the anti-aliasing stage did (PRSS, footprint).
+    pub post: Option<crate::film::prss::PostStats>,
+    /// Rays traced in the adaptive second pass (PRSS fallback `trace`).
+    pub retraced_pixels: u64,
 }
 
 /// Build times of the structures a scene needs (zero when cached).
@@ -169,6 +177,8 @@ impl RenderStats {
             "solve_efficiency": c.cells_with_crossing as f64 / c.cells_solved.max(1) as f64,
             "stage_cpu_s": stages,
             "prepare": self.prepare,
+            "post": self.post,
+            "retraced_pixels": self.retraced_pixels,
         })
     }
 
@@ -214,6 +224,12 @@ impl RenderStats {
             c.kernel_evals as f64 / rays,
             c.brent_iters as f64 / rays,
         ));
+        if let Some(p) = &self.post {
+            s.push_str(&format!(
+                "anti-aliasing: {} quadrants interpolated, {} mirrored, {} nearest; {} pixels re-traced\n",
+                p.quadrants_interpolated, p.quadrants_mirrored, p.quadrants_nearest, p.pixels_flagged
+            ));
+        }
         s.push_str(&format!(
             "events: {} refractions, {} total internal reflections, {} degenerate normals; {} rays stopped by max_events, {} missed the backdrop, {} undefined\n",
             c.refractions, c.reflections, c.degenerate_normals, c.terminated, c.missed_backdrop, c.undefined

@@ -31,6 +31,53 @@ impl Tile {
     }
 }
 
+/// The pixels one work item covers: a rectangle, or an explicit sorted list
+/// of pixel indices (the second, adaptive pass of PRSS).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum Region {
+    Rect(Tile),
+    List(Vec<u32>),
+}
+
+impl Region {
+    pub fn pixels(&self) -> usize {
+        match self {
+            Region::Rect(t) => t.pixels(),
+            Region::List(l) => l.len(),
+        }
+    }
+
+    /// Image pixel indices, in the region's order.
+    pub fn for_each_pixel(&self, width: u32, mut f: impl FnMut(u32, u32)) {
+        match self {
+            Region::Rect(t) => {
+                for py in t.y0..t.y1 {
+                    for px in t.x0..t.x1 {
+                        f(px, py);
+                    }
+                }
+            }
+            Region::List(l) => {
+                for &p in l {
+                    f(p % width, p / width);
+                }
+            }
+        }
+    }
+}
+
+/// How many rays a pixel gets, where, and with what colour weight.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum Sampling {
+    /// The pixel-centre ray only (colour weight 1).
+    Centre,
+    /// `n × n` rays on a regular grid; `centre` also traces the pixel-centre
+    /// ray for the hit-position image (shared when `n` is odd).
+    Grid { n: u32, centre: bool },
+    /// `n × n` strata with one seeded random ray each.
+    Jitter { n: u32, seed: u64, centre: bool },
+}
+
 /// Row-major tiles of `size` covering a `width × height` image.
 pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
     let mut out = Vec::new();
@@ -50,7 +97,7 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
 /// What a tile produces: its part of the film.
 #[derive(Clone, Debug)]
 pub struct TileOut {
-    pub tile: Tile,
+    pub region: Region,
     pub u: Vec<f32>,
     pub v: Vec<f32>,
     pub events: Vec<f32>,
@@ -60,10 +107,10 @@ pub struct TileOut {
 }
 
 impl TileOut {
-    fn new(tile: Tile) -> TileOut {
-        let n = tile.pixels();
+    fn new(region: Region) -> TileOut {
+        let n = region.pixels();
         TileOut {
-            tile,
+            region,
             u: vec![f32::NAN; n],
             v: vec![f32::NAN; n],
             events: vec![0.0; n],
@@ -73,9 +120,13 @@ impl TileOut {
         }
     }
 
+    /// Position of image pixel `(px, py)` in this output (`pixel` is its index).
     #[inline]
-    pub fn local_index(&self, px: u32, py: u32) -> usize {
-        ((py - self.tile.y0) * self.tile.width() + (px - self.tile.x0)) as usize
+    pub fn local_index(&self, px: u32, py: u32, pixel: u32) -> usize {
+        match &self.region {
+            Region::Rect(t) => ((py - t.y0) * t.width() + (px - t.x0)) as usize,
+            Region::List(l) => l.binary_search(&pixel).expect("pixel of this region"),
+        }
     }
 }
 
@@ -89,14 +140,19 @@ macro_rules! stage {
     }};
 }
 
-/// Traces every ray of `tile`. Scratch comes from `bump`, which the caller
-/// resets between tiles.
-pub fn render_tile<const S: usize>(ctx: &Ctx, tile: Tile, bump: &Bump) -> TileOut {
-    let mut out = TileOut::new(tile);
+/// Traces every ray of `region` sampled per `sampling`. Scratch comes from
+/// `bump`, which the caller resets between tiles.
+pub fn render_tile<const S: usize>(
+    ctx: &Ctx,
+    region: Region,
+    sampling: Sampling,
+    bump: &Bump,
+) -> TileOut {
+    let mut out = TileOut::new(region);
     let mut counters = Counters::default();
     let mut times = StageTimes::default();
     let c = &mut counters;
-    let n = tile.pixels();
+    let n = out.region.pixels() * generate::rays_per_pixel(sampling);
     let mut rays = Rays::with_capacity_in(n, bump);
     let mut primary = BVec::with_capacity_in(n, bump);
     let mut traverse_q = BVec::with_capacity_in(n, bump);
@@ -107,7 +163,7 @@ pub fn render_tile<const S: usize>(ctx: &Ctx, tile: Tile, bump: &Bump) -> TileOu
     stage!(
         times,
         Stage::Generate,
-        generate::generate(ctx, &tile, &mut rays, &mut primary)
+        generate::generate(ctx, &out.region, sampling, &mut rays, &mut primary)
     );
     stage!(
         times,

@@ -42,7 +42,10 @@ impl Texture {
         if !(x > -1.0 && y > -1.0 && x < self.width_px as f64 && y < self.height_px as f64) {
             return self.outside;
         }
-        let (x0, y0) = (x.floor(), y.floor());
+        let (x0, y0) = (
+            crate::filter::kernel::floor_i64(x) as f64,
+            crate::filter::kernel::floor_i64(y) as f64,
+        );
         let (fx, fy) = ((x - x0) as f32, (y - y0) as f32);
         let clampx = |i: f64| (i.max(0.0) as usize).min(self.width_px - 1);
         let clampy = |i: f64| (i.max(0.0) as usize).min(self.height_px - 1);
@@ -88,8 +91,10 @@ impl Backdrop {
     pub fn color(&self, u: f64, v: f64) -> [f32; 3] {
         match &self.pattern {
             Pattern::Checker { size, colors } => {
-                let parity = ((u / size).floor() + (v / size).floor()).rem_euclid(2.0);
-                if parity == 0.0 { colors[0] } else { colors[1] }
+                use crate::filter::kernel::floor_i64;
+                // Integer parity: no libm floor or fmod in the hottest lookup.
+                let parity = floor_i64(u / size).wrapping_add(floor_i64(v / size)) & 1;
+                if parity == 0 { colors[0] } else { colors[1] }
             }
             Pattern::Image(tex) => tex.sample(u, v),
         }

@@ -183,15 +183,35 @@ pub enum Traversal {
     Octree,
 }
 
-/// How many rays per pixel, and how their colours combine.
+/// How each pixel's colour is anti-aliased (see `film::prss`).
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum Supersampling {
+    /// One ray through the pixel centre.
     #[default]
     None,
+    /// Real supersampling: `samples × samples` rays on a regular grid.
     Grid,
+    /// Real supersampling: one jittered ray per stratum (seeded).
     Jitter,
+    /// Post-refraction supersampling from the hit-position image (the paper).
     Prss,
+    /// The pixel's backdrop footprint from hit-position differences, box-filtered.
+    Footprint,
+}
+
+/// What PRSS does where a pixel's neighbours cannot be interpolated (no
+/// backdrop hit, or a different number of interfaces crossed).
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PrssFallback {
+    /// Extrapolate from the opposite neighbour, else use the centre hit.
+    #[default]
+    Mirror,
+    /// Use the centre hit for that quadrant.
+    Nearest,
+    /// Trace real sub-pixel rays for the pixel (adaptive supersampling).
+    Trace,
 }
 
 #[derive(Deserialize, Debug)]
@@ -217,6 +237,11 @@ struct RenderCfg {
     supersampling: Supersampling,
     #[serde(default = "default_samples")]
     samples: u32,
+    /// PRSS neighbourhood: 1 (3×3, bilinear) or 2 (5×5, bicubic).
+    #[serde(default = "default_ring")]
+    prss_ring: u32,
+    #[serde(default)]
+    prss_fallback: PrssFallback,
     #[serde(default)]
     seed: u64,
 }
@@ -239,6 +264,9 @@ fn default_samples() -> u32 {
 fn default_leaf() -> u32 {
     4
 }
+fn default_ring() -> u32 {
+    1
+}
 
 impl Default for RenderCfg {
     fn default() -> Self {
@@ -252,6 +280,8 @@ impl Default for RenderCfg {
             leaf: default_leaf(),
             supersampling: Supersampling::default(),
             samples: default_samples(),
+            prss_ring: default_ring(),
+            prss_fallback: PrssFallback::default(),
             seed: 0,
         }
     }
@@ -298,8 +328,10 @@ pub struct RenderSettings {
     /// Octree leaf side in cells.
     pub leaf: u32,
     pub supersampling: Supersampling,
-    /// `N` for `N×N` rays per pixel (grid, jitter).
+    /// `N` for `N×N` rays per pixel (grid, jitter) or sub-points (PRSS).
     pub samples: u32,
+    pub prss_ring: u32,
+    pub prss_fallback: PrssFallback,
     pub seed: u64,
 }
 
@@ -705,6 +737,12 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             "step traversal samples every point and uses no classification".into(),
         ));
     }
+    if !(1..=2).contains(&r.prss_ring) {
+        return Err(bad(
+            "render.prss_ring",
+            format!("must be 1 or 2, got {}", r.prss_ring),
+        ));
+    }
     if !r.leaf.is_power_of_two() || r.leaf > 64 {
         return Err(bad(
             "render.leaf",
@@ -721,6 +759,8 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         leaf: r.leaf,
         supersampling: r.supersampling,
         samples: r.samples,
+        prss_ring: r.prss_ring,
+        prss_fallback: r.prss_fallback,
         seed: r.seed,
     };
 

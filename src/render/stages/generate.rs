@@ -1,17 +1,72 @@
-//! Stage 1: primary rays for every pixel of the tile.
+//! Stage 1: primary rays for every pixel of the region.
+//!
+//! The pixel-centre ray goes through `(px+0.5, py+0.5)` (SPEC.md) and writes
+//! the hit-position image; supersampling adds `n×n` rays per pixel on a grid or
+//! jittered within strata, each carrying colour weight `1/n²`. Jitter comes
+//! from a counter-based generator keyed by (seed, pixel, sample), so it is the
+//! same for any tile size or thread count.
 
 use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
-use super::super::tile::Tile;
+use super::super::tile::{Region, Sampling};
+use crate::phantom::{mix64, uniform};
 
-/// Pushes the pixel-centre ray of each pixel (SPEC: through `(px+0.5, py+0.5)`).
-pub fn generate(ctx: &Ctx, tile: &Tile, rays: &mut Rays, out: &mut Queue) {
-    let cam = &ctx.scene.camera;
-    let width = ctx.scene.width;
-    for py in tile.y0..tile.y1 {
-        for px in tile.x0..tile.x1 {
-            let (o, d) = cam.ray(px as f64 + 0.5, py as f64 + 0.5);
-            out.push(rays.push(py * width + px, 1.0, true, o, d));
+/// Rays traced per pixel (capacity planning).
+pub fn rays_per_pixel(sampling: Sampling) -> usize {
+    match sampling {
+        Sampling::Centre => 1,
+        Sampling::Grid { n, centre } | Sampling::Jitter { n, centre, .. } => {
+            (n * n) as usize + centre as usize
         }
     }
+}
+
+pub fn generate(ctx: &Ctx, region: &Region, sampling: Sampling, rays: &mut Rays, out: &mut Queue) {
+    let cam = &ctx.scene.camera;
+    let width = ctx.scene.width;
+    region.for_each_pixel(width, |px, py| {
+        let pixel = py * width + px;
+        let (x, y) = (px as f64, py as f64);
+        let mut push = |ox: f64, oy: f64, weight: f32, centre: bool| {
+            let (o, d) = cam.ray(x + ox, y + oy);
+            out.push(rays.push(pixel, weight, centre, o, d));
+        };
+        match sampling {
+            Sampling::Centre => push(0.5, 0.5, 1.0, true),
+            Sampling::Grid { n, centre } => {
+                let w = 1.0 / (n * n) as f32;
+                // With odd n the middle grid ray is the pixel-centre ray.
+                let shared = n % 2 == 1;
+                if centre && !shared {
+                    push(0.5, 0.5, 0.0, true);
+                }
+                for j in 0..n {
+                    for i in 0..n {
+                        let is_mid = shared && i == n / 2 && j == n / 2;
+                        let (ox, oy) = ((i as f64 + 0.5) / n as f64, (j as f64 + 0.5) / n as f64);
+                        push(ox, oy, w, centre && is_mid);
+                    }
+                }
+            }
+            Sampling::Jitter { n, seed, centre } => {
+                let w = 1.0 / (n * n) as f32;
+                if centre {
+                    push(0.5, 0.5, 0.0, true);
+                }
+                let key = mix64(seed ^ mix64(pixel as u64));
+                for j in 0..n {
+                    for i in 0..n {
+                        let k = 2 * (j * n + i) as u64;
+                        let (ju, jv) = (uniform(key, k), uniform(key, k + 1));
+                        push(
+                            (i as f64 + ju) / n as f64,
+                            (j as f64 + jv) / n as f64,
+                            w,
+                            false,
+                        );
+                    }
+                }
+            }
+        }
+    });
 }

@@ -35,7 +35,7 @@ pub fn record(ctx: &Ctx, rays: &Rays, input: &[u32], out: &mut TileOut, c: &mut 
             None => ctx.scene.background,
         };
         let px = rays.pixel[i];
-        let local = out.local_index(px % width, px / width);
+        let local = out.local_index(px % width, px / width, px);
         let w = rays.weight[i];
         for k in 0..3 {
             out.color[local][k] += w * color[k];
