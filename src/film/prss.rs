@@ -46,6 +46,10 @@ pub struct PostSettings {
     /// 1: 3×3 bilinear, 2: 5×5 bicubic (PRSS only).
     pub ring: u32,
     pub fallback: PrssFallback,
+    /// With the `Trace` fallback, pixels whose map bends more than this many
+    /// backdrop features (checker squares, or photo texels) between
+    /// neighbours are re-traced too: interpolation would misplace sub-samples.
+    pub curvature: f64,
 }
 
 /// What the stage did, for the stats.
@@ -61,6 +65,8 @@ pub struct PostStats {
     pub quadrants_nearest: u64,
     /// Pixels handed to the renderer for real supersampling.
     pub pixels_flagged: u64,
+    /// Of those, pixels flagged because the map bends too fast.
+    pub pixels_curved: u64,
 }
 
 impl PostStats {
@@ -70,6 +76,7 @@ impl PostStats {
         self.quadrants_mirrored += o.quadrants_mirrored;
         self.quadrants_nearest += o.quadrants_nearest;
         self.pixels_flagged += o.pixels_flagged;
+        self.pixels_curved += o.pixels_curved;
     }
 }
 
@@ -246,6 +253,31 @@ fn average(samples: impl Iterator<Item = [f32; 3]>, count: usize) -> [f32; 3] {
     acc.map(|v| (v / count as f64) as f32)
 }
 
+/// Size of the backdrop's smallest feature: a checker square or a texel.
+fn feature_size(backdrop: &Backdrop) -> f64 {
+    match &backdrop.pattern {
+        Pattern::Checker { size, .. } => *size,
+        Pattern::Image(t) => t.world_width / t.width_px as f64,
+    }
+}
+
+/// True when the second difference of the map along x or y exceeds `limit`:
+/// a bilinear patch would put sub-samples that far off.
+fn bends(hits: &Hits, x: i64, y: i64, centre: [f64; 2], ev: f32, limit: f64) -> bool {
+    [(1, 0), (0, 1)].iter().any(|&(dx, dy)| {
+        match (
+            hits.consistent(x + dx, y + dy, ev),
+            hits.consistent(x - dx, y - dy, ev),
+        ) {
+            (Some(f), Some(b)) => {
+                let d2 = [f[0] + b[0] - 2.0 * centre[0], f[1] + b[1] - 2.0 * centre[1]];
+                (d2[0] * d2[0] + d2[1] * d2[1]).sqrt() > limit
+            }
+            _ => false,
+        }
+    })
+}
+
 /// PRSS colour of one pixel, or `None` to re-trace it.
 fn prss_pixel(
     hits: &Hits,
@@ -256,6 +288,12 @@ fn prss_pixel(
     st: &mut PostStats,
 ) -> Option<[f32; 3]> {
     let (centre, ev) = hits.at(x, y)?;
+    if s.fallback == PrssFallback::Trace
+        && bends(hits, x, y, centre, ev, s.curvature * feature_size(backdrop))
+    {
+        st.pixels_curved += 1;
+        return None;
+    }
     let n = s.samples.max(1) as usize;
     let mut quads: [Option<Quad>; 4] = [None, None, None, None];
     let p = Centre {
@@ -323,6 +361,12 @@ fn footprint_pixel(
             (None, None) => None,
         }
     };
+    if s.fallback == PrssFallback::Trace
+        && bends(hits, x, y, centre, ev, s.curvature * feature_size(backdrop))
+    {
+        st.pixels_curved += 1;
+        return None;
+    }
     let (jx, jy) = match (deriv(1, 0), deriv(0, 1)) {
         (Some(a), Some(b)) => {
             st.quadrants_interpolated += 4;

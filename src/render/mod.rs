@@ -96,6 +96,7 @@ pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) ->
             samples: n,
             ring: rs.prss_ring,
             fallback: rs.prss_fallback,
+            curvature: rs.prss_curvature,
         };
         let post = prss::shade(&film, &scene.backdrop, scene.background, &settings);
         film.color = post.color;

@@ -226,8 +226,12 @@ impl RenderStats {
         ));
         if let Some(p) = &self.post {
             s.push_str(&format!(
-                "anti-aliasing: {} quadrants interpolated, {} mirrored, {} nearest; {} pixels re-traced\n",
-                p.quadrants_interpolated, p.quadrants_mirrored, p.quadrants_nearest, p.pixels_flagged
+                "anti-aliasing: {} quadrants interpolated, {} mirrored, {} nearest; {} pixels re-traced ({} for curvature)\n",
+                p.quadrants_interpolated,
+                p.quadrants_mirrored,
+                p.quadrants_nearest,
+                p.pixels_flagged,
+                p.pixels_curved
             ));
         }
         s.push_str(&format!(

@@ -242,6 +242,10 @@ struct RenderCfg {
     prss_ring: u32,
     #[serde(default)]
     prss_fallback: PrssFallback,
+    /// With `prss_fallback = "trace"`: re-trace pixels whose hit map bends by
+    /// more than this many checker squares (or texels) between neighbours.
+    #[serde(default = "default_curvature")]
+    prss_curvature: f64,
     #[serde(default)]
     seed: u64,
 }
@@ -267,6 +271,9 @@ fn default_leaf() -> u32 {
 fn default_ring() -> u32 {
     1
 }
+fn default_curvature() -> f64 {
+    0.25
+}
 
 impl Default for RenderCfg {
     fn default() -> Self {
@@ -282,6 +289,7 @@ impl Default for RenderCfg {
             samples: default_samples(),
             prss_ring: default_ring(),
             prss_fallback: PrssFallback::default(),
+            prss_curvature: default_curvature(),
             seed: 0,
         }
     }
@@ -332,6 +340,7 @@ pub struct RenderSettings {
     pub samples: u32,
     pub prss_ring: u32,
     pub prss_fallback: PrssFallback,
+    pub prss_curvature: f64,
     pub seed: u64,
 }
 
@@ -737,6 +746,12 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             "step traversal samples every point and uses no classification".into(),
         ));
     }
+    if !(r.prss_curvature.is_finite() && r.prss_curvature > 0.0) {
+        return Err(bad(
+            "render.prss_curvature",
+            format!("must be > 0 (checker squares), got {}", r.prss_curvature),
+        ));
+    }
     if !(1..=2).contains(&r.prss_ring) {
         return Err(bad(
             "render.prss_ring",
@@ -761,6 +776,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         samples: r.samples,
         prss_ring: r.prss_ring,
         prss_fallback: r.prss_fallback,
+        prss_curvature: r.prss_curvature,
         seed: r.seed,
     };
 
