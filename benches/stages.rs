@@ -88,6 +88,24 @@ fn crossing(c: &mut Criterion) {
         g.bench_function(format!("{name}/bernstein"), |b| {
             b.iter(|| basis.segment(black_box(&buf[..=d])))
         });
+        // The same segment in every lane: per-segment cost of the SIMD path.
+        let (base, tau, delta) = f.lane_segment(cell, p0, p1);
+        let isa = snell::simd::Isa::current();
+        let lanes = isa.lanes();
+        g.bench_function(format!("{name}/lanes {} x{lanes}", isa.name()), |b| {
+            b.iter(|| {
+                snell::with_isa!(isa, L, M => {
+                    let seg = snell::filter::restrict::LaneSegments::<L> {
+                        base: [base; L],
+                        tau: std::array::from_fn(|a| [tau[a]; L]),
+                        delta: std::array::from_fn(|a| [delta[a]; L]),
+                    };
+                    let mut mono = [[0.0; L]; 22];
+                    with_support!(s, S => f.restrict_lanes::<S, L, M>(black_box(&seg), 127.5, &mut mono));
+                    basis.bernstein_lanes::<L, M>(&mono)[0][0]
+                })
+            })
+        });
         let poly = basis.segment(&buf[..=d]);
         let mut stack = Vec::with_capacity(64);
         g.bench_function(format!("{name}/isolate+brent"), |b| {
@@ -164,13 +182,11 @@ fn refraction(c: &mut Criterion) {
     });
 }
 
-criterion_group!(
-    stages,
-    prefilter,
-    evaluation,
-    crossing,
-    classification,
-    traversal,
-    refraction
-);
+criterion_group! {
+    name = stages;
+    // Numbers only: criterion's HTML plots need fonts the plotters build
+    // shared with `snell bench` does not carry.
+    config = Criterion::default().without_plots();
+    targets = prefilter, evaluation, crossing, classification, traversal, refraction
+}
 criterion_main!(stages);

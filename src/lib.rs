@@ -13,16 +13,19 @@
 #![allow(clippy::needless_range_loop)]
 
 pub mod atomic;
+pub mod bench;
 pub mod classify;
 pub mod compare;
 pub mod film;
 pub mod filter;
 pub mod lattice;
 pub mod octree;
+pub mod peer;
 pub mod phantom;
 pub mod prepare;
 pub mod reference;
 pub mod render;
 pub mod roots;
 pub mod scene;
+pub mod simd;
 pub mod volume;

@@ -15,24 +15,86 @@
 use std::collections::HashMap;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::sync::Arc;
+use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use crate::classify::{self, Method, Tags};
 use crate::filter::coeffs::Coeffs;
+use crate::filter::patch::Patches;
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
-use crate::octree::Octree;
+use crate::octree::{Octree, Proximity};
 use crate::render::PrepareTimes;
 use crate::scene::{Scene, SceneError, Traversal, VolumeSource};
 use crate::volume::{LoadOptions, Volume};
 
-/// Cell classification and the octree over it, for one iso-value.
+/// Cell classification and the skipping structures over it, for one
+/// iso-value. The distance field is built only when a traversal asks for it.
 pub struct Accel {
     pub method: Method,
     /// The scene's iso-value it was built for.
     pub iso: f64,
     pub octree: Octree,
+    proximity: OnceLock<Proximity>,
+    patches: OnceLock<Option<Patches>>,
+}
+
+/// Largest memory the per-cell patches may take (they are an optimisation:
+/// without them the solve stage restricts from the coefficients directly).
+pub const PATCH_BUDGET: usize = 2 << 30;
+
+impl Accel {
+    /// The distance field, built on first use; returns it and its build time
+    /// (0 when it already existed).
+    pub fn proximity(&self) -> (&Proximity, f64) {
+        let start = Instant::now();
+        let mut built = false;
+        let p = self.proximity.get_or_init(|| {
+            built = true;
+            Proximity::build(self.octree.tags())
+        });
+        (
+            p,
+            if built {
+                start.elapsed().as_secs_f64()
+            } else {
+                0.0
+            },
+        )
+    }
+
+    /// The distance field if it was built.
+    pub fn proximity_if_built(&self) -> Option<&Proximity> {
+        self.proximity.get()
+    }
+
+    /// Power-basis patches of the tagged cells, built on first use when they
+    /// fit [`PATCH_BUDGET`]; returns them (or `None`) and the build time.
+    pub fn patches(&self, field: &Field) -> (Option<&Patches>, f64) {
+        let start = Instant::now();
+        let mut built = false;
+        let p = self.patches.get_or_init(|| {
+            built = true;
+            let tags = self.octree.tags();
+            // SNELL_NO_PATCHES=1 restricts from the coefficients (comparisons).
+            let disabled = std::env::var_os("SNELL_NO_PATCHES").is_some();
+            (!disabled && Patches::bytes_for(tags, field.kernel().support()) <= PATCH_BUDGET)
+                .then(|| Patches::build(field, tags))
+        });
+        (
+            p.as_ref(),
+            if built {
+                start.elapsed().as_secs_f64()
+            } else {
+                0.0
+            },
+        )
+    }
+
+    /// The patches if they were built (and fit the budget).
+    pub fn patches_if_built(&self) -> Option<&Patches> {
+        self.patches.get().and_then(|p| p.as_ref())
+    }
 }
 
 /// Inputs of one frame.
@@ -69,6 +131,17 @@ impl Prepared {
         self
     }
 
+    /// Makes sure the structures `traversal` needs exist (the distance field).
+    pub fn ready_for(&mut self, traversal: Traversal) {
+        let Some(a) = &self.accel else { return };
+        if traversal == Traversal::Distance {
+            self.times.octree_s += a.proximity().1;
+        }
+        if traversal != Traversal::Step {
+            self.times.octree_s += a.patches(&self.field).1;
+        }
+    }
+
     /// Loads and prepares what `scene` needs, without caching.
     pub fn for_scene(scene: &Scene, opts: &LoadOptions) -> Result<Prepared, SceneError> {
         Cache::new().prepare(scene, opts)
@@ -79,7 +152,7 @@ impl Prepared {
 pub fn needs_accel(scene: &Scene) -> Option<Method> {
     match scene.render.traversal {
         Traversal::Step => None,
-        Traversal::Dda | Traversal::Octree => scene.render.classify,
+        Traversal::Dda | Traversal::Octree | Traversal::Distance => scene.render.classify,
     }
 }
 
@@ -95,6 +168,8 @@ fn build_accel(field: &Field, iso: f64, method: Method, tags: Option<Tags>) -> (
             method,
             iso,
             octree,
+            proximity: OnceLock::new(),
+            patches: OnceLock::new(),
         },
         classify_s,
         start.elapsed().as_secs_f64(),
@@ -221,12 +296,14 @@ impl Cache {
                 }
             }
         };
-        Ok(Prepared {
+        let mut p = Prepared {
             volume,
             field,
             accel,
             times,
-        })
+        };
+        p.ready_for(scene.render.traversal);
+        Ok(p)
     }
 
     fn disk_path(&self, hash: u64, name: &str) -> Option<PathBuf> {

@@ -1,8 +1,10 @@
 //! Subcommands; each module turns parsed arguments into library calls.
 
+mod bench;
 mod classify;
 mod common;
 mod compare;
+mod export_pov;
 mod info;
 mod phantom;
 mod reference;
@@ -42,6 +44,11 @@ enum Command {
     Compare(compare::Args),
     /// Count the cells each classification method tags (BMCC, ACCC, Bezier, exact).
     Classify(classify::Args),
+    /// Write the scene for POV-Ray 3.7 (DF3 + isosurface .pov files), optionally render it.
+    #[command(name = "export-pov")]
+    ExportPov(export_pov::Args),
+    /// Benchmark run time against error: a suite of configurations to tables, CSV, JSON and plots.
+    Bench(bench::Args),
 }
 
 pub fn run(cli: Cli) -> anyhow::Result<()> {
@@ -53,5 +60,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Reference(a) => reference::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Classify(a) => classify::run(a),
+        Command::ExportPov(a) => export_pov::run(a),
+        Command::Bench(a) => bench::run(a),
     }
 }

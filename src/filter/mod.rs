@@ -13,6 +13,7 @@
 pub mod coeffs;
 pub mod field;
 pub mod kernel;
+pub mod patch;
 pub mod prefilter;
 pub mod restrict;
 

@@ -12,7 +12,11 @@
 //! parameter (one tree serves every leaf size), trades tree lookups per step
 //! against cells stepped through one by one.
 
+pub mod distance;
+
 use rayon::prelude::*;
+
+pub use distance::Proximity;
 
 use crate::classify::Tags;
 
@@ -79,13 +83,20 @@ impl Level {
     }
 }
 
-/// Occupancy pyramid over cell tags.
+/// Occupancy pyramid over cell tags, flattened for traversal.
 #[derive(Clone, Debug)]
 pub struct Octree {
     tags: Tags,
     /// `levels[l - 1]` is level `l` (level 0 is `tags`).
     levels: Vec<Level>,
+    /// Per cell: [`TAGGED`], or the level of the largest empty block holding
+    /// it — the answer of a descent through `levels`, precomputed, so a
+    /// traversal step is one byte load instead of a walk down the tree.
+    skip: Vec<u8>,
 }
+
+/// Marks a tagged cell in the flattened skip map.
+pub const TAGGED: u8 = u8::MAX;
 
 impl Octree {
     /// Builds every level up to the root (a single block covering the lattice).
@@ -107,7 +118,8 @@ impl Octree {
             dims = next.dims;
             levels.push(next);
         }
-        Octree { tags, levels }
+        let skip = flatten(&tags, &levels);
+        Octree { tags, levels, skip }
     }
 
     /// Height of the tree: the root is level `top()`.
@@ -120,7 +132,21 @@ impl Octree {
     }
 
     pub fn bytes(&self) -> usize {
-        self.tags.bytes() + self.levels.iter().map(|l| l.words.len() * 8).sum::<usize>()
+        self.tags.bytes()
+            + self.levels.iter().map(|l| l.words.len() * 8).sum::<usize>()
+            + self.skip.len()
+    }
+
+    /// [`Octree::skip_level`] from the flattened map: one load.
+    #[inline(always)]
+    pub fn skip_level_fast(&self, c: [i64; 3], leaf_level: u32) -> Option<u32> {
+        let n = self.tags.cells;
+        let i = c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize);
+        match self.skip[i] {
+            TAGGED => None,
+            l if (l as u32) < leaf_level.max(1) => Some(0),
+            l => Some(l as u32),
+        }
     }
 
     /// For cell `c` (in range): `None` when the cell is tagged (solve it),
@@ -145,6 +171,35 @@ impl Octree {
         }
         Some(l)
     }
+}
+
+/// Per cell, the level of the largest empty aligned block holding it (the
+/// largest `l` whose block at every level up to `l` is empty), or `TAGGED`.
+fn flatten(tags: &Tags, levels: &[Level]) -> Vec<u8> {
+    let [nx, ny, nz] = tags.cells;
+    let top = levels.len();
+    let slabs: Vec<Vec<u8>> = (0..nz)
+        .into_par_iter()
+        .map(|z| {
+            let mut out = vec![0u8; nx * ny];
+            for y in 0..ny {
+                for x in 0..nx {
+                    let c = [x, y, z];
+                    out[x + nx * y] = if tags.get([x as i64, y as i64, z as i64]) {
+                        TAGGED
+                    } else {
+                        let mut l = 0;
+                        while l < top && !levels[l].get(c.map(|v| v >> (l + 1))) {
+                            l += 1;
+                        }
+                        l as u8
+                    };
+                }
+            }
+            out
+        })
+        .collect();
+    slabs.concat()
 }
 
 #[cfg(test)]
@@ -178,6 +233,23 @@ mod tests {
         assert_eq!(o.skip_level([5, 5, 3], 0), Some(2));
         let empty = Octree::build(Tags::empty([13, 9, 5]));
         assert_eq!(empty.skip_level([3, 3, 3], 0), Some(4), "the root is empty");
+        // The flattened map answers every cell and leaf level identically.
+        for o in [&o, &empty] {
+            for z in 0..5 {
+                for y in 0..9 {
+                    for x in 0..13 {
+                        for leaf in 0..5 {
+                            let c = [x, y, z];
+                            assert_eq!(
+                                o.skip_level(c, leaf),
+                                o.skip_level_fast(c, leaf),
+                                "{c:?} leaf {leaf}"
+                            );
+                        }
+                    }
+                }
+            }
+        }
     }
 
     #[test]

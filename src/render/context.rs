@@ -5,8 +5,9 @@ use glam::DVec3;
 
 use crate::classify::CellBound;
 use crate::filter::Field;
+use crate::filter::patch::Patches;
 use crate::lattice::Lattice;
-use crate::octree::Octree;
+use crate::octree::{Octree, Proximity};
 use crate::prepare::Prepared;
 use crate::roots::bernstein::BernsteinBasis;
 use crate::scene::{RenderSettings, Scene, Traversal};
@@ -18,6 +19,8 @@ pub enum Skip<'a> {
     /// Precomputed tags under an octree; `leaf_level` is where the top-down
     /// search stops (the root's level for a plain DDA over the tags).
     Octree { tree: &'a Octree, leaf_level: u32 },
+    /// Cubes of empty cells from the distance field.
+    Distance(&'a Proximity),
 }
 
 /// Shared, read-only state of one frame.
@@ -34,6 +37,8 @@ pub struct Ctx<'a> {
     pub box_max: DVec3,
     pub basis: BernsteinBasis,
     pub skip: Skip<'a>,
+    /// Per-cell power-basis patches of the tagged cells, when prepared.
+    pub patches: Option<&'a Patches>,
     pub settings: RenderSettings,
     /// Indices of refraction inside and outside the object.
     pub ior_inside: f64,
@@ -71,8 +76,11 @@ impl<'a> Ctx<'a> {
                     tree: &a.octree,
                     leaf_level: a.octree.top(),
                 },
+                (Some(a), Traversal::Distance) => Skip::Distance(a.proximity().0),
                 _ => Skip::Bound(CellBound::new(kernel)),
             },
+            // Built on demand if `Prepared::ready_for` did not (then untimed).
+            patches: prep.accel.as_ref().and_then(|a| a.patches(field).0),
             settings: scene.render,
             ior_inside: scene.surface.ior,
             ior_outside: scene.surface.outside_ior,

@@ -35,6 +35,9 @@ pub struct Rays<'a> {
     pub dir: [BVec<'a, f64>; 3],
     /// Current ray parameter (world units along `dir` from `org`).
     pub t: BVec<'a, f64>,
+    /// Where the current straight piece starts (its entry into the domain,
+    /// or just past the last crossing).
+    pub t_start: BVec<'a, f64>,
     /// Where the current piece leaves the volume's bounds.
     pub t_end: BVec<'a, f64>,
     /// End of the segment handed to the solve stage.
@@ -61,6 +64,7 @@ impl<'a> Rays<'a> {
             org: [f(), f(), f()],
             dir: [f(), f(), f()],
             t: f(),
+            t_start: f(),
             t_end: f(),
             seg_end: f(),
             seg_g: [f(), f()],
@@ -96,6 +100,7 @@ impl<'a> Rays<'a> {
             self.cell[a].push(0);
         }
         self.t.push(0.0);
+        self.t_start.push(0.0);
         self.t_end.push(0.0);
         self.seg_end.push(0.0);
         self.seg_g[0].push(0.0);

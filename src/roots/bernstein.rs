@@ -85,6 +85,65 @@ impl BernsteinBasis {
     }
 }
 
+impl BernsteinBasis {
+    /// Bernstein coefficients of `L` polynomials at once (`mono[m][lane]`).
+    #[inline(always)]
+    pub fn bernstein_lanes<const L: usize, M: crate::simd::Madd>(
+        &self,
+        mono: &[[f64; L]; N],
+    ) -> [[f64; L]; N] {
+        let d = self.degree;
+        let mut out = [[0.0f64; L]; N];
+        for i in 0..=d {
+            let row = &self.m[i * (d + 1)..i * (d + 1) + i + 1];
+            let mut acc = [0.0f64; L];
+            for (j, &w) in row.iter().enumerate() {
+                for l in 0..L {
+                    acc[l] = M::madd(w, mono[j][l], acc[l]);
+                }
+            }
+            out[i] = acc;
+        }
+        out
+    }
+
+    /// Lane `l` of `mono`/`bern` as a [`SegmentPoly`].
+    #[inline]
+    pub fn lane<const L: usize>(
+        &self,
+        mono: &[[f64; L]; N],
+        bern: &[[f64; L]; N],
+        l: usize,
+    ) -> SegmentPoly {
+        let mut p = SegmentPoly {
+            degree: self.degree,
+            mono: [0.0; N],
+            bern: [0.0; N],
+        };
+        for i in 0..=self.degree {
+            p.mono[i] = mono[i][l];
+            p.bern[i] = bern[i][l];
+        }
+        p
+    }
+}
+
+/// True when lane `l` of Bernstein coefficients `bern` (degree `d`) provably
+/// stays on the `from_inside` side (see [`SegmentPoly::stays`]).
+#[inline(always)]
+pub fn lane_stays<const L: usize>(
+    bern: &[[f64; L]; N],
+    d: usize,
+    l: usize,
+    from_inside: bool,
+) -> bool {
+    if from_inside {
+        bern[..=d].iter().all(|b| inside(b[l]))
+    } else {
+        bern[..=d].iter().all(|b| !inside(b[l]))
+    }
+}
+
 impl SegmentPoly {
     /// `g(s)` by Horner on the monomial form.
     #[inline(always)]
@@ -94,6 +153,39 @@ impl SegmentPoly {
             v = v * s + c;
         }
         v
+    }
+
+    /// `g(s)` and `g'(s)` by Horner.
+    #[inline(always)]
+    pub fn eval_deriv(&self, s: f64) -> (f64, f64) {
+        let (mut v, mut d) = (0.0, 0.0);
+        for &c in self.mono[..=self.degree].iter().rev() {
+            d = d * s + v;
+            v = v * s + c;
+        }
+        (v, d)
+    }
+
+    /// Refines a root bracketed in `[lo, hi]` by Newton steps, kept inside
+    /// the bracket, until it stops improving: the crossing then sits at
+    /// machine precision whatever path Brent took to it, so two ways of
+    /// computing the same polynomial agree on the root.
+    fn polish(&self, mut x: f64, lo: f64, hi: f64) -> f64 {
+        let (mut g, _) = self.eval_deriv(x);
+        for _ in 0..4 {
+            let (_, d) = self.eval_deriv(x);
+            if d == 0.0 || g == 0.0 {
+                break;
+            }
+            let next = (x - g / d).clamp(lo, hi);
+            let (gn, _) = self.eval_deriv(next);
+            if gn.abs() >= g.abs() {
+                break;
+            }
+            x = next;
+            g = gn;
+        }
+        x
     }
 
     /// Bernstein coefficients (for tests and bounds).
@@ -171,7 +263,7 @@ impl SegmentPoly {
                 if variations == 1 {
                     let r = brent::solve(|s| self.eval(s), lo, hi, coeffs[0], coeffs[d], tol);
                     work.brent_iters += r.evals;
-                    return Some(r.x.clamp(lo, hi));
+                    return Some(self.polish(r.x.clamp(lo, hi), lo, hi));
                 }
                 return Some(0.5 * (lo + hi));
             }

@@ -181,6 +181,9 @@ pub enum Traversal {
     Dda,
     /// Top-down octree over classified cells, DDA inside occupied leaves.
     Octree,
+    /// Jumps over the empty cube given by each cell's distance to the nearest
+    /// classified cell (beyond the paper).
+    Distance,
 }
 
 /// How each pixel's colour is anti-aliased (see `film::prss`).
@@ -720,7 +723,9 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         ));
     }
     let classify = match r.classify.as_deref() {
-        None if r.traversal == Traversal::Octree => Some(DEFAULT_OCTREE_CLASSIFY),
+        None if matches!(r.traversal, Traversal::Octree | Traversal::Distance) => {
+            Some(DEFAULT_OCTREE_CLASSIFY)
+        }
         None | Some("none") => None,
         Some(name) => match Method::parse(name) {
             Some(m) if m.is_conservative() => Some(m),
@@ -734,7 +739,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             }
         },
     };
-    if r.traversal == Traversal::Octree && classify.is_none() {
+    if matches!(r.traversal, Traversal::Octree | Traversal::Distance) && classify.is_none() {
         return Err(bad(
             "render.classify",
             "the octree is built over classified cells: use bmcc, accc or bezier".into(),

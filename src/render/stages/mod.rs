@@ -39,6 +39,7 @@ pub(crate) fn place<const S: usize>(
 ) {
     let p = ctx.to_grid(rays.origin(i) + t * rays.direction(i));
     rays.t[i] = t;
+    rays.t_start[i] = t;
     rays.t_end[i] = t_end;
     rays.advance[i] = false;
     let cell = [

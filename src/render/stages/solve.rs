@@ -12,11 +12,14 @@
 use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
 use super::field_minus_iso;
-use crate::filter::restrict::knot_cell;
+use crate::filter::patch::{patch_lanes, restrict_patch_lanes, weight_matrix};
+use crate::render::stages::traverse::{CellRay, cell_span};
 use crate::render::stats::Counters;
-use crate::roots::bernstein::{Interval, IsolationWork, MAX_DEGREE};
+use crate::roots::bernstein::{Interval, IsolationWork, MAX_DEGREE, lane_stays};
 use crate::roots::{brent, inside};
 use crate::scene::Traversal;
+use crate::simd::{Isa, Madd};
+use crate::with_isa;
 
 pub fn solve<const S: usize>(
     ctx: &Ctx,
@@ -32,59 +35,107 @@ pub fn solve<const S: usize>(
                 solve_bracket::<S>(ctx, rays, r, refract, traverse, c);
             }
         }
-        Traversal::Dda | Traversal::Octree => {
-            let mut g = [0.0; MAX_DEGREE + 1];
-            let mut stack = Vec::with_capacity(64);
-            for &r in input {
-                solve_cell::<S>(ctx, rays, r, &mut g, &mut stack, refract, traverse, c);
-            }
+        Traversal::Dda | Traversal::Octree | Traversal::Distance => {
+            let isa = Isa::current();
+            with_isa!(isa, L, M => solve_cells::<S, L, M>(ctx, rays, input, refract, traverse, c))
         }
     }
 }
 
-#[allow(clippy::too_many_arguments)]
-fn solve_cell<const S: usize>(
+/// Cell segments in groups of `L` lanes: the cells' power-basis patches
+/// (precomputed, or computed here by the same routine), the restriction and
+/// its Bernstein form for the whole group in SIMD; only lanes whose hull
+/// straddles the iso-value go on to scalar isolation and Brent.
+///
+/// A segment is the cell's slab interval clipped to the ray's current piece,
+/// and the patch is the same bits whether precomputed or not, so every
+/// traversal (DDA, octree, distance) solves a given cell identically.
+#[inline(always)]
+fn solve_cells<const S: usize, const L: usize, M: Madd>(
     ctx: &Ctx,
     rays: &mut Rays,
-    r: u32,
-    g: &mut [f64; MAX_DEGREE + 1],
-    stack: &mut Vec<Interval>,
+    input: &[u32],
     refract: &mut Queue,
     traverse: &mut Queue,
     c: &mut Counters,
 ) {
-    let i = r as usize;
-    let (t0, t1) = (rays.t[i], rays.seg_end[i]);
-    let og = ctx.to_grid(rays.origin(i));
-    let dg = ctx.to_grid(rays.direction(i));
-    let len = dg.length() * (t1 - t0);
-    c.cells_solved += 1;
-    if len > 1e-13 {
-        let p0 = og + t0 * dg;
-        let p1 = og + t1 * dg;
-        let cell = rays.cell_of(i);
-        debug_assert!((0..3).all(|a| {
-            let k = knot_cell(0.5 * (p0[a] + p1[a]), ctx.lattice.offset);
-            (k - cell[a]).abs() <= 1
-        }));
-        ctx.field
-            .restrict::<S>(cell, p0.to_array(), p1.to_array(), ctx.iso, g);
-        let poly = ctx.basis.segment(&g[..=ctx.basis.degree()]);
-        let tol = (ctx.settings.tolerance / len).min(0.25);
-        let mut work = IsolationWork::default();
-        let hit = poly.first_crossing_with(rays.inside[i], tol, &mut work, stack);
-        c.isolation_intervals += work.intervals as u64;
-        c.brent_iters += work.brent_iters as u64;
-        if let Some(s) = hit {
-            c.cells_with_crossing += 1;
-            rays.t[i] = t0 + s * (t1 - t0);
-            refract.push(r);
-            return;
+    let mut stack: Vec<Interval> = Vec::with_capacity(64);
+    let d = ctx.basis.degree();
+    let weights = weight_matrix(ctx.field);
+    let mut patch = vec![[0.0f64; L]; S * S * S];
+    let mut tmp = vec![[0.0f64; L]; S * S * S];
+    let off = ctx.lattice.offset;
+    for group in input.chunks(L) {
+        let mut tau = [[0.0; L]; 3];
+        let mut delta = [[0.0; L]; 3];
+        let mut bases = [0usize; L];
+        let mut slots = [0usize; L];
+        let mut all_slots = ctx.patches.is_some();
+        let mut span = [(0.0f64, 0.0f64, 0.0f64); L];
+        for l in 0..L {
+            // Short groups repeat their first ray; its lane results are ignored.
+            let i = group[l.min(group.len() - 1)] as usize;
+            let og = ctx.to_grid(rays.origin(i));
+            let dg = ctx.to_grid(rays.direction(i));
+            let cell = rays.cell_of(i);
+            let ray = CellRay::new([og.x + off, og.y + off, og.z + off], [dg.x, dg.y, dg.z]);
+            let (c0, c1) = cell_span(&ray, cell);
+            let t0 = c0.max(rays.t_start[i]);
+            let t1 = c1.min(rays.t_end[i]).max(t0);
+            let (p0, p1) = (og + t0 * dg, og + t1 * dg);
+            let (base, ta, de) = ctx.field.lane_segment(cell, p0.to_array(), p1.to_array());
+            bases[l] = base;
+            for a in 0..3 {
+                tau[a][l] = ta[a];
+                delta[a][l] = de[a];
+            }
+            if let Some(p) = ctx.patches {
+                match p.slot(cell) {
+                    Some(s) => slots[l] = s,
+                    None => all_slots = false,
+                }
+            }
+            span[l] = (t0, t1, dg.length() * (t1 - t0));
+        }
+        match ctx.patches {
+            Some(p) if all_slots => p.gather::<S, L>(&slots, &mut patch),
+            _ => patch_lanes::<S, L, M>(ctx.field, &weights, &bases, &mut patch, &mut tmp),
+        }
+        let mut mono = [[0.0; L]; MAX_DEGREE + 1];
+        restrict_patch_lanes::<S, L, M>(&patch, &tau, &delta, ctx.iso, &mut mono);
+        let bern = ctx.basis.bernstein_lanes::<L, M>(&mono);
+        for (l, &r) in group.iter().enumerate() {
+            let i = r as usize;
+            let (t0, t1, len) = span[l];
+            c.cells_solved += 1;
+            let mut hit = None;
+            if len > 1e-13 {
+                let from_inside = rays.inside[i];
+                if lane_stays(&bern, d, l, from_inside) {
+                    c.isolation_intervals += 1;
+                } else {
+                    let poly = ctx.basis.lane(&mono, &bern, l);
+                    let tol = (ctx.settings.tolerance / len).min(0.25);
+                    let mut work = IsolationWork::default();
+                    hit = poly.first_crossing_with(from_inside, tol, &mut work, &mut stack);
+                    c.isolation_intervals += work.intervals as u64;
+                    c.brent_iters += work.brent_iters as u64;
+                }
+            }
+            match hit {
+                Some(s) => {
+                    c.cells_with_crossing += 1;
+                    rays.t[i] = t0 + s * (t1 - t0);
+                    refract.push(r);
+                }
+                None => {
+                    rays.t[i] = t1;
+                    rays.advance[i] = true;
+                    traverse.push(r);
+                }
+            }
         }
     }
-    rays.t[i] = t1;
-    rays.advance[i] = true;
-    traverse.push(r);
 }
 
 fn solve_bracket<const S: usize>(

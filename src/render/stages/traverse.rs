@@ -29,7 +29,7 @@ pub fn traverse<const S: usize>(
                 march::<S>(ctx, rays, r, solve, record, c);
             }
         }
-        Traversal::Dda | Traversal::Octree => {
+        Traversal::Dda | Traversal::Octree | Traversal::Distance => {
             for &r in input {
                 walk(ctx, rays, r, solve, record, c);
             }
@@ -56,23 +56,53 @@ impl CellRay {
     }
 }
 
+/// The parameter interval where the ray is inside `cell`: a pure function of
+/// the ray and the cell, so a segment is the same bits however the walk
+/// reached the cell (by single steps or by a jump over a block).
+#[inline(always)]
+pub fn cell_span(ray: &CellRay, cell: [i64; 3]) -> (f64, f64) {
+    let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+    for a in 0..3 {
+        if ray.du[a] != 0.0 {
+            let ta = (cell[a] as f64 - ray.ou[a]) * ray.inv[a];
+            let tb = ((cell[a] + 1) as f64 - ray.ou[a]) * ray.inv[a];
+            t0 = t0.max(ta.min(tb));
+            t1 = t1.min(ta.max(tb));
+        }
+    }
+    (t0, t1)
+}
+
 /// Where the ray leaves the aligned block of `2^level` cells holding `cell`
 /// (not before `t`), and the cell it enters there.
-///
-/// The exit axis moves to the neighbouring block exactly; the other axes come
-/// from the exit point, clamped into the block and never moving backwards, so
-/// every step makes progress whatever the rounding (rays along faces, edges
-/// and corners included).
 #[inline(always)]
 pub fn exit_block(ray: &CellRay, cell: [i64; 3], level: u32, t: f64) -> (f64, [i64; 3]) {
-    let CellRay { ou, du, inv } = *ray;
     let size = 1i64 << level;
     let lo = cell.map(|c| (c >> level) << level);
+    exit_box(ray, cell, lo, lo.map(|l| l + size - 1), t)
+}
+
+/// Where the ray leaves the box of cells `lo ..= hi` (which holds `cell`),
+/// not before `t`, and the cell it enters there.
+///
+/// The exit axis moves just past the box exactly; the other axes come from
+/// the exit point, clamped into the box and never moving backwards, so every
+/// step makes progress whatever the rounding (rays along faces, edges and
+/// corners included).
+#[inline(always)]
+pub fn exit_box(
+    ray: &CellRay,
+    cell: [i64; 3],
+    lo: [i64; 3],
+    hi: [i64; 3],
+    t: f64,
+) -> (f64, [i64; 3]) {
+    let CellRay { ou, du, inv } = *ray;
     let mut t_exit = f64::INFINITY;
     let mut axis = 0;
     for a in 0..3 {
         let ta = if du[a] > 0.0 {
-            ((lo[a] + size) as f64 - ou[a]) * inv[a]
+            ((hi[a] + 1) as f64 - ou[a]) * inv[a]
         } else if du[a] < 0.0 {
             (lo[a] as f64 - ou[a]) * inv[a]
         } else {
@@ -87,10 +117,9 @@ pub fn exit_block(ray: &CellRay, cell: [i64; 3], level: u32, t: f64) -> (f64, [i
     let mut next = cell;
     for a in 0..3 {
         if a == axis {
-            next[a] = if du[a] > 0.0 { lo[a] + size } else { lo[a] - 1 };
+            next[a] = if du[a] > 0.0 { hi[a] + 1 } else { lo[a] - 1 };
         } else if du[a] != 0.0 {
-            let at = floor_i64(ou[a] + t_new * du[a]);
-            let at = at.clamp(lo[a], lo[a] + size - 1);
+            let at = floor_i64(ou[a] + t_new * du[a]).clamp(lo[a], hi[a]);
             next[a] = if du[a] > 0.0 {
                 at.max(cell[a])
             } else {
@@ -101,12 +130,81 @@ pub fn exit_block(ray: &CellRay, cell: [i64; 3], level: u32, t: f64) -> (f64, [i
     (t_new, next)
 }
 
-#[inline(always)]
-fn in_range(ctx: &Ctx, c: [i64; 3]) -> bool {
-    (0..3).all(|a| c[a] >= 0 && (c[a] as usize) < ctx.lattice.cells[a])
+/// Incremental Amanatides–Woo state: the ray's current cell, the parameter
+/// where it entered, and where it crosses the next boundary on each axis. A
+/// single-cell step is a comparison and two additions; after a jump over an
+/// empty block the state is re-seeded from the new cell.
+struct Dda {
+    cell: [i64; 3],
+    t: f64,
+    t_max: [f64; 3],
+    t_delta: [f64; 3],
+    step: [i64; 3],
 }
 
-/// Cell walk for `dda` and `octree`.
+impl Dda {
+    #[inline(always)]
+    fn new(ray: &CellRay, cell: [i64; 3], t: f64) -> Dda {
+        let mut d = Dda {
+            cell,
+            t,
+            t_max: [f64::INFINITY; 3],
+            t_delta: [f64::INFINITY; 3],
+            step: [0; 3],
+        };
+        for a in 0..3 {
+            if ray.du[a] != 0.0 {
+                d.step[a] = if ray.du[a] > 0.0 { 1 } else { -1 };
+                d.t_delta[a] = ray.inv[a].abs();
+            }
+        }
+        d.seed(ray, cell, t);
+        d
+    }
+
+    /// Moves to `cell` at `t` (after a jump) and recomputes the boundaries.
+    #[inline(always)]
+    fn seed(&mut self, ray: &CellRay, cell: [i64; 3], t: f64) {
+        self.cell = cell;
+        self.t = t;
+        for a in 0..3 {
+            if self.step[a] != 0 {
+                let edge = (cell[a] + (self.step[a] > 0) as i64) as f64;
+                self.t_max[a] = ((edge - ray.ou[a]) * ray.inv[a]).max(t);
+            }
+        }
+    }
+
+    /// Where the ray leaves the current cell.
+    #[inline(always)]
+    fn cell_exit(&self) -> f64 {
+        self.t_max[0].min(self.t_max[1]).min(self.t_max[2])
+    }
+
+    /// Steps into the next cell along the ray.
+    #[inline(always)]
+    fn advance(&mut self) {
+        let a = if self.t_max[0] <= self.t_max[1] {
+            if self.t_max[0] <= self.t_max[2] { 0 } else { 2 }
+        } else if self.t_max[1] <= self.t_max[2] {
+            1
+        } else {
+            2
+        };
+        self.t = self.t_max[a];
+        self.cell[a] += self.step[a];
+        self.t_max[a] += self.t_delta[a];
+    }
+}
+
+#[inline(always)]
+fn in_range(ctx: &Ctx, c: [i64; 3]) -> bool {
+    let n = ctx.lattice.cells;
+    (c[0] as u64) < n[0] as u64 && (c[1] as u64) < n[1] as u64 && (c[2] as u64) < n[2] as u64
+}
+
+/// Cell walk for `dda`, `octree` and `distance`: single cells step by the
+/// incremental DDA, skipped blocks and cubes by [`exit_box`].
 fn walk(
     ctx: &Ctx,
     rays: &mut Rays,
@@ -120,34 +218,51 @@ fn walk(
     let dg = ctx.to_grid(rays.direction(i));
     let off = ctx.lattice.offset;
     let ray = CellRay::new([og.x + off, og.y + off, og.z + off], [dg.x, dg.y, dg.z]);
-    let mut cell = rays.cell_of(i);
-    let mut t = rays.t[i];
+    let mut w = Dda::new(&ray, rays.cell_of(i), rays.t[i]);
     let t_end = rays.t_end[i];
     if rays.advance[i] {
         rays.advance[i] = false;
-        (t, cell) = exit_block(&ray, cell, 0, t);
+        w.advance();
     }
     loop {
-        if t >= t_end || !in_range(ctx, cell) {
+        if w.t >= t_end || !in_range(ctx, w.cell) {
             rays.fate[i] = Fate::Escaped;
             record.push(r);
             return;
         }
         c.cells_visited += 1;
+        let cell = w.cell;
         let skip = match &ctx.skip {
             Skip::Bound(b) => (!b.may_cross(ctx.field, cell, ctx.iso)).then_some(0),
-            Skip::Octree { tree, leaf_level } => tree.skip_level(cell, *leaf_level),
+            Skip::Octree { tree, leaf_level } => tree.skip_level_fast(cell, *leaf_level),
+            Skip::Distance(p) => match p.get(cell) {
+                0 => None,
+                1 => Some(0),
+                d => {
+                    // The cube of radius d-1 around the cell is empty.
+                    let r = d as i64 - 1;
+                    let n = ctx.lattice.cells;
+                    let lo = std::array::from_fn(|a| (cell[a] - r).max(0));
+                    let hi = std::array::from_fn(|a| (cell[a] + r).min(n[a] as i64 - 1));
+                    let (t, next) = exit_box(&ray, cell, lo, hi, w.t);
+                    w.seed(&ray, next, t);
+                    continue;
+                }
+            },
         };
         match skip {
             None => {
-                let (t_next, _) = exit_block(&ray, cell, 0, t);
-                rays.t[i] = t;
-                rays.seg_end[i] = t_next.min(t_end);
+                rays.t[i] = w.t;
+                rays.seg_end[i] = w.cell_exit().min(t_end);
                 rays.set_cell(i, cell);
                 solve.push(r);
                 return;
             }
-            Some(level) => (t, cell) = exit_block(&ray, cell, level, t),
+            Some(0) => w.advance(),
+            Some(level) => {
+                let (t, next) = exit_block(&ray, cell, level, w.t);
+                w.seed(&ray, next, t);
+            }
         }
     }
 }

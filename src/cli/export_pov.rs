@@ -1,0 +1,162 @@
+//! `snell export-pov`: the scene for POV-Ray 3.7 (DF3 volume, colour and
+//! hit-position `.pov` files), and optionally the render itself.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, bail};
+use clap::Args as ClapArgs;
+
+use snell::peer::povray::{self, PovOptions, Variant};
+use snell::peer::{Interpolation, PeerError};
+use snell::scene::Scene;
+use snell::volume::LoadOptions;
+
+use super::common::check_output;
+
+#[derive(ClapArgs, Debug)]
+pub struct Args {
+    /// Scene file (TOML).
+    pub scene: PathBuf,
+    /// Directory for volume.df3, scene.pov, hits.pov and peer.json (created if missing).
+    pub dir: PathBuf,
+    /// Override a scene value (repeatable).
+    #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
+    pub set: Vec<String>,
+    /// Isosurface accuracy 1e-4 instead of 1e-3 (grid units).
+    #[arg(long)]
+    pub careful: bool,
+    /// Density interpolation: 1 (trilinear) or 2 (tricubic Catmull-Rom); default from the scene's filter.
+    #[arg(long, value_name = "1|2")]
+    pub interpolate: Option<String>,
+    /// Use this max_gradient instead of the bound computed from the data.
+    #[arg(long, value_name = "G")]
+    pub max_gradient: Option<f64>,
+    /// Threads for the printed command lines and for --run.
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Also run POV-Ray (colour and hit renders) and report its times.
+    #[arg(long)]
+    pub run: bool,
+    /// With --run: write POV-Ray's decoded hit positions as a hit-position EXR.
+    #[arg(long, value_name = "HITS.exr")]
+    pub hits: Option<PathBuf>,
+    /// With --run: print the result as JSON.
+    #[arg(long)]
+    pub json: bool,
+}
+
+pub fn run(a: Args) -> anyhow::Result<()> {
+    let scene = Scene::load(&a.scene, &a.set)?;
+    if a.threads == 0 {
+        bail!("--threads must be at least 1");
+    }
+    if (a.hits.is_some() || a.json) && !a.run {
+        bail!("--hits and --json need --run");
+    }
+    if a.dir.exists() && !a.dir.is_dir() {
+        bail!("{}: exists and is not a directory", a.dir.display());
+    }
+    let mut opts = PovOptions::new(&scene, a.careful);
+    if let Some(i) = &a.interpolate {
+        opts.interpolation = Interpolation::parse(i)
+            .with_context(|| format!("--interpolate: expected 1 or 2, got '{i}'"))?;
+    }
+    if let Some(g) = a.max_gradient {
+        if !(g.is_finite() && g > 0.0) {
+            bail!("--max-gradient must be > 0, got {g}");
+        }
+        opts.max_gradient = Some(g);
+    }
+    if a.run && !povray::installed() {
+        return Err(PeerError::NotInstalled.into());
+    }
+    let vol = scene.load_volume(&LoadOptions::default())?;
+    std::fs::create_dir_all(&a.dir)
+        .with_context(|| format!("{}: cannot create directory", a.dir.display()))?;
+    if let Some(h) = &a.hits {
+        check_output(h)?;
+    }
+    let dir = a.dir.canonicalize().unwrap_or_else(|_| a.dir.clone());
+    let ex = povray::export(&dir, &scene, &vol, &opts)?;
+
+    if !a.json {
+        let m = &ex.mapping;
+        println!(
+            "wrote {}: {}x{}x{} samples (+ mirror border), 16-bit, density = (value - {}) * {} / 65535{}",
+            dir.join(povray::DF3_FILE).display(),
+            m.dims[0],
+            m.dims[1],
+            m.dims[2],
+            m.lo,
+            m.scale,
+            if m.exact { " (exact)" } else { "" }
+        );
+        println!(
+            "wrote {} and {}: interpolate {}, iso {} (density {:.9}), ior {}, accuracy {:e}, \
+             max_gradient {:.6} (data bound {:.6} x {}), max_trace_level {}",
+            dir.join(povray::COLOR_POV).display(),
+            dir.join(povray::HITS_POV).display(),
+            ex.interpolation.keyword(),
+            scene.surface.iso,
+            ex.iso_density,
+            ex.ior,
+            ex.accuracy,
+            ex.max_gradient,
+            ex.gradient_estimate,
+            ex.gradient_safety,
+            ex.max_trace_level
+        );
+        let e = &ex.encoding;
+        println!(
+            "hits.png decodes as k = B - 1 (B = 0: no hit), u = {} + (k / 256 + R/65535) * {t}, \
+             v = {} + (k % 256 + G/65535) * {t} (resolution {:.3e} backdrop units, window {} wide)",
+            e.u0,
+            e.v0,
+            e.resolution(),
+            e.window(),
+            t = e.tile
+        );
+        println!("colour: {}", ex.command_line(Variant::Color, a.threads));
+        println!("hits:   {}", ex.command_line(Variant::Hits, a.threads));
+    }
+    if !a.run {
+        return Ok(());
+    }
+    let color = povray::render(&ex, Variant::Color, a.threads)?;
+    let hits_run = povray::render(&ex, Variant::Hits, a.threads)?;
+    let hits = povray::decode_hits(&hits_run.png, &ex.encoding)?;
+    if let Some(h) = &a.hits {
+        hits.write_exr(h)?;
+    }
+    let warnings: Vec<&String> = color
+        .stats
+        .warnings
+        .iter()
+        .chain(&hits_run.stats.warnings)
+        .collect();
+    if a.json {
+        let j = serde_json::json!({
+            "export": ex,
+            "color": color,
+            "hits": hits_run,
+        });
+        println!("{j}");
+    } else {
+        let f = |x: Option<f64>| x.map_or("?".to_string(), |s| format!("{s:.3} s"));
+        for (name, r) in [("colour", &color), ("hits", &hits_run)] {
+            println!(
+                "{name} render: parse {}, trace {} ({} threads, {} CPU), whole process {:.3} s -> {}",
+                f(r.stats.parse_seconds),
+                f(r.stats.trace_seconds),
+                r.stats.threads.map_or("?".to_string(), |t| t.to_string()),
+                f(r.stats.trace_cpu_seconds),
+                r.wall_seconds,
+                r.png.display()
+            );
+        }
+    }
+    for w in warnings {
+        eprintln!("warning: povray: {w}");
+    }
+    Ok(())
+}

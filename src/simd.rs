@@ -1,0 +1,161 @@
+//! SIMD across rays, chosen once at run time.
+//!
+//! Hot stages process rays in *lanes*: `L` rays doing the same arithmetic on
+//! `[f64; L]` arrays (vertical SIMD, no horizontal reductions). The lane code
+//! is written once, generic over `L` and over [`Madd`] (fused or plain
+//! multiply-add), and compiled three times through `#[target_feature]`
+//! wrappers: AVX-512 (8 lanes), AVX2 + FMA (4 lanes) and a portable fallback
+//! (2 lanes, SSE2). [`Isa::current`] picks the best the CPU has, once.
+//!
+//! Each ray's result depends only on its own inputs, never on which lane or
+//! chunk it lands in, so output is identical for any thread count or tile
+//! size. Fused and unfused multiply-adds round differently, so two machines
+//! with different instruction sets may differ in the last bits.
+
+use std::sync::OnceLock;
+
+/// The instruction set the lane code runs with.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Isa {
+    Avx512,
+    Avx2,
+    Portable,
+}
+
+impl Isa {
+    /// The best the running CPU supports (`SNELL_ISA=avx512|avx2|portable`
+    /// forces a lower one, for comparisons).
+    pub fn current() -> Isa {
+        static ISA: OnceLock<Isa> = OnceLock::new();
+        *ISA.get_or_init(|| {
+            let best = Isa::detect();
+            match std::env::var("SNELL_ISA").ok().as_deref() {
+                Some("portable") => Isa::Portable,
+                Some("avx2") if best != Isa::Portable => Isa::Avx2,
+                _ => best,
+            }
+        })
+    }
+
+    fn detect() -> Isa {
+        #[cfg(target_arch = "x86_64")]
+        {
+            if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                return Isa::Avx512;
+            }
+            if std::arch::is_x86_feature_detected!("avx2")
+                && std::arch::is_x86_feature_detected!("fma")
+            {
+                return Isa::Avx2;
+            }
+        }
+        Isa::Portable
+    }
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Isa::Avx512 => "avx512",
+            Isa::Avx2 => "avx2+fma",
+            Isa::Portable => "portable",
+        }
+    }
+
+    /// Rays per lane group.
+    pub fn lanes(self) -> usize {
+        match self {
+            Isa::Avx512 => 8,
+            Isa::Avx2 => 4,
+            Isa::Portable => 2,
+        }
+    }
+}
+
+/// `a·b + c`, fused where the instruction set has it.
+pub trait Madd: Copy {
+    fn madd(a: f64, b: f64, c: f64) -> f64;
+}
+
+/// One rounding (`vfmadd`); only inside FMA-enabled functions.
+#[derive(Clone, Copy)]
+pub struct Fused;
+impl Madd for Fused {
+    #[inline(always)]
+    fn madd(a: f64, b: f64, c: f64) -> f64 {
+        a.mul_add(b, c)
+    }
+}
+
+/// Two roundings; what a CPU without FMA does.
+#[derive(Clone, Copy)]
+pub struct Plain;
+impl Madd for Plain {
+    #[inline(always)]
+    fn madd(a: f64, b: f64, c: f64) -> f64 {
+        a * b + c
+    }
+}
+
+/// Runs `$body` with `$L` (lanes) and `$M` (multiply-add) bound for the
+/// current instruction set, inside a function compiled for it. `$body` must
+/// be an expression; everything it calls should be `#[inline(always)]` so it
+/// is compiled with the target's features.
+#[macro_export]
+macro_rules! with_isa {
+    ($isa:expr, $L:ident, $M:ident => $body:expr) => {{
+        #[allow(unused_unsafe)]
+        match $isa {
+            #[cfg(target_arch = "x86_64")]
+            $crate::simd::Isa::Avx512 => {
+                #[target_feature(enable = "avx512f,avx512vl,avx512dq,fma,avx2")]
+                unsafe fn run<R>(f: impl FnOnce() -> R) -> R {
+                    f()
+                }
+                const $L: usize = 8;
+                type $M = $crate::simd::Fused;
+                // SAFETY: Isa::Avx512 is only chosen when the CPU has these features.
+                unsafe {
+                    run(
+                        #[inline(always)]
+                        || $body,
+                    )
+                }
+            }
+            #[cfg(target_arch = "x86_64")]
+            $crate::simd::Isa::Avx2 => {
+                #[target_feature(enable = "avx2,fma")]
+                unsafe fn run<R>(f: impl FnOnce() -> R) -> R {
+                    f()
+                }
+                const $L: usize = 4;
+                type $M = $crate::simd::Fused;
+                // SAFETY: Isa::Avx2 is only chosen when the CPU has these features.
+                unsafe {
+                    run(
+                        #[inline(always)]
+                        || $body,
+                    )
+                }
+            }
+            _ => {
+                const $L: usize = 2;
+                type $M = $crate::simd::Plain;
+                $body
+            }
+        }
+    }};
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn dispatch_runs_on_this_cpu() {
+        let isa = Isa::current();
+        let (lanes, v) = with_isa!(isa, L, M => (L, M::madd(2.0, 3.0, 1.0)));
+        assert_eq!(lanes, isa.lanes());
+        assert_eq!(v, 7.0);
+    }
+}

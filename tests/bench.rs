@@ -1,0 +1,293 @@
+//! `snell bench` end to end through the real binary: the hidden `smoke`
+//! suite (a 64×64 sphere in three configurations) writes every promised
+//! output with the promised fields, updates a markdown section in place, and
+//! bad input fails with one error line and exit code 2.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn snell(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_snell"))
+        .args(args)
+        .current_dir(env!("CARGO_MANIFEST_DIR"))
+        .output()
+        .unwrap()
+}
+
+struct Tmp(PathBuf);
+impl Tmp {
+    fn new(tag: &str) -> Tmp {
+        let p = std::env::temp_dir().join(format!("snell-bench-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&p);
+        std::fs::create_dir_all(&p).unwrap();
+        Tmp(p)
+    }
+    fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+}
+impl Drop for Tmp {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn number(v: &serde_json::Value, path: &str) -> f64 {
+    let mut cur = v;
+    for k in path.split('.') {
+        cur = &cur[k];
+    }
+    cur.as_f64()
+        .unwrap_or_else(|| panic!("{path} is not a number: {cur}"))
+}
+
+#[test]
+fn smoke_suite_writes_every_output() {
+    let tmp = Tmp::new("smoke");
+    let out = tmp.path("out");
+    let md = tmp.path("BENCHMARKS.md");
+    let intro = "# Benchmarks\n\nHand-written intro.\n\n<!-- bench:smoke:begin -->\nstale\n<!-- bench:smoke:end -->\n\nHand-written outro.\n";
+    std::fs::write(&md, intro).unwrap();
+    let o = snell(&[
+        "bench",
+        "--suite",
+        "smoke",
+        "--out",
+        s(&out),
+        "--repeats",
+        "2",
+        "--threads",
+        "2",
+        "--update",
+        s(&md),
+    ]);
+    assert!(o.status.success(), "stderr: {}", stderr(&o));
+
+    for f in [
+        "results.json",
+        "results.csv",
+        "tables.md",
+        "time_vs_error.png",
+        "time_vs_error.svg",
+        "stages.png",
+        "stages.svg",
+    ] {
+        let len = std::fs::metadata(out.join(f))
+            .unwrap_or_else(|e| panic!("{f}: {e}"))
+            .len();
+        assert!(len > 0, "{f} is empty");
+    }
+    assert!(
+        std::fs::read(out.join("time_vs_error.png"))
+            .unwrap()
+            .starts_with(b"\x89PNG")
+    );
+
+    let j: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(out.join("results.json")).unwrap()).unwrap();
+    assert_eq!(j["suite"], "smoke");
+    // Machine and run provenance.
+    assert!(number(&j, "machine.nproc") >= 1.0);
+    assert!(j["machine"].get("cpu_model").is_some());
+    assert_eq!(j["machine"]["snell_version"], env!("CARGO_PKG_VERSION"));
+    let command = j["run"]["command"].as_str().unwrap();
+    assert!(command.contains("bench --suite smoke"), "{command}");
+    assert!(j["run"]["date"].as_str().unwrap().ends_with('Z'));
+    assert_eq!(number(&j, "run.threads"), 2.0);
+    assert_eq!(number(&j, "run.repeats"), 2.0);
+
+    let configs = j["configurations"].as_array().unwrap();
+    assert_eq!(configs.len(), 3, "three distinct configurations");
+    for c in configs {
+        let name = c["name"].as_str().unwrap();
+        let (median, min, max) = (
+            number(c, "wall_ms.median"),
+            number(c, "wall_ms.min"),
+            number(c, "wall_ms.max"),
+        );
+        assert!(min > 0.0 && min <= median && median <= max, "{name}");
+        assert_eq!(
+            c["wall_ms"]["all"].as_array().unwrap().len() as f64,
+            number(c, "runs")
+        );
+        for stage in [
+            "generate", "entry", "traverse", "solve", "refract", "record", "prss", "film",
+        ] {
+            assert!(
+                number(c, &format!("stage_cpu_ms.{stage}")) >= 0.0,
+                "{name}: {stage}"
+            );
+        }
+        assert!(number(c, "rays_per_s") > 0.0, "{name}");
+        for k in [
+            "cells_visited",
+            "cells_solved",
+            "solved_with_crossing",
+            "kernel_evals",
+            "brent_iters",
+        ] {
+            assert!(number(c, &format!("per_ray.{k}")) >= 0.0, "{name}: {k}");
+        }
+        assert_eq!(c["error"]["reference"], "analytic", "{name}");
+        assert_eq!(c["error"]["unit"], "squares", "{name}");
+        let (p50, p90, p99) = (
+            number(c, "error.p50"),
+            number(c, "error.p90"),
+            number(c, "error.p99"),
+        );
+        assert!(0.0 <= p50 && p50 <= p90 && p90 <= p99, "{name}");
+        assert!(number(c, "error.events_equal") > 0.9, "{name}");
+        if cfg!(target_os = "linux") {
+            assert!(number(c, "peak_rss_mib") > 0.0, "{name}");
+        }
+    }
+    // Anti-aliasing rows carry image quality against the 16×16 render;
+    // the shared octree row got it for the anti-aliasing table.
+    let prss = configs
+        .iter()
+        .find(|c| c["settings"]["supersampling"] == "prss")
+        .unwrap();
+    assert!(number(prss, "quality.psnr") > 10.0);
+    assert!(number(prss, "quality.ssim") > 0.5);
+    let step = configs
+        .iter()
+        .find(|c| c["settings"]["traversal"] == "step")
+        .unwrap();
+    assert!(step["quality"].is_null(), "no anti-aliasing, no quality");
+    assert_eq!(number(step, "runs"), 1.0, "step is capped at one timed run");
+
+    // Tables: speedups vs step, classification counts.
+    let tables = j["tables"].as_array().unwrap();
+    let trav = &tables[0];
+    assert_eq!(trav["kind"], "render");
+    let rows = trav["rows"].as_array().unwrap();
+    assert_eq!(rows[0]["vs_baseline"].as_f64(), Some(1.0));
+    assert!(
+        rows[1]["vs_baseline"].as_f64().unwrap() > 1.0,
+        "octree beats step"
+    );
+    let classify = tables.iter().find(|t| t["kind"] == "classify").unwrap();
+    let counts = &classify["rows"][0]["methods"];
+    assert_eq!(counts[0]["method"], "bmcc");
+    assert!(counts[1]["tagged"].as_u64().unwrap() <= counts[0]["tagged"].as_u64().unwrap());
+    assert!(!j["builds"].as_array().unwrap().is_empty());
+
+    // CSV: a header and one row per configuration.
+    let csv = std::fs::read_to_string(out.join("results.csv")).unwrap();
+    assert_eq!(csv.lines().count(), 1 + configs.len());
+    assert!(csv.starts_with("id,scene,name,"));
+
+    // tables.md and the updated section, with the hand-written text kept.
+    let tables_md = std::fs::read_to_string(out.join("tables.md")).unwrap();
+    assert!(
+        tables_md.contains("| configuration | median ms |"),
+        "{tables_md}"
+    );
+    let updated = std::fs::read_to_string(&md).unwrap();
+    assert!(updated.starts_with(
+        "# Benchmarks\n\nHand-written intro.\n\n<!-- bench:smoke:begin -->\nGenerated by `"
+    ));
+    assert!(updated.ends_with("<!-- bench:smoke:end -->\n\nHand-written outro.\n"));
+    assert!(!updated.contains("stale"));
+    assert!(updated.contains("| step 0.1 |"));
+}
+
+/// Exit 2 and one `error:` line containing `needle`, no panic.
+fn assert_fails(o: &Output, needle: &str) {
+    let e = stderr(o);
+    assert_eq!(o.status.code(), Some(2), "stderr: {e}");
+    assert!(!e.contains("panicked"), "{e}");
+    let errors: Vec<&str> = e.lines().filter(|l| l.starts_with("error")).collect();
+    assert_eq!(errors.len(), 1, "{e}");
+    assert!(
+        errors[0].contains(needle),
+        "'{needle}' not in {}",
+        errors[0]
+    );
+}
+
+#[test]
+fn bad_input_fails_fast_with_one_line() {
+    let tmp = Tmp::new("bad");
+    let out = tmp.path("out");
+    assert_fails(
+        &snell(&["bench", "--suite", "nope", "--out", s(&out)]),
+        "unknown suite 'nope'",
+    );
+    // Output below a regular file cannot be created.
+    let file = tmp.path("file");
+    std::fs::write(&file, "x").unwrap();
+    let under = file.join("out");
+    assert_fails(
+        &snell(&["bench", "--suite", "smoke", "--out", s(&under)]),
+        s(&file),
+    );
+    assert_fails(
+        &snell(&["bench", "--suite", "smoke", "--out", s(&file)]),
+        "not a directory",
+    );
+    assert_fails(
+        &snell(&[
+            "bench",
+            "--suite",
+            "smoke",
+            "--out",
+            s(&out),
+            "--repeats",
+            "0",
+        ]),
+        "--repeats",
+    );
+    assert_fails(
+        &snell(&[
+            "bench",
+            "--suite",
+            "smoke",
+            "--out",
+            s(&out),
+            "--threads",
+            "0",
+        ]),
+        "--threads",
+    );
+    assert_fails(
+        &snell(&[
+            "bench",
+            "--suite",
+            "smoke",
+            "--out",
+            s(&out),
+            "--scenes",
+            s(&tmp.0),
+        ]),
+        "sphere.toml",
+    );
+    // Malformed markers are refused before any rendering.
+    let md = tmp.path("B.md");
+    std::fs::write(
+        &md,
+        "<!-- bench:smoke:end -->\n<!-- bench:smoke:begin -->\n",
+    )
+    .unwrap();
+    assert_fails(
+        &snell(&[
+            "bench",
+            "--suite",
+            "smoke",
+            "--out",
+            s(&out),
+            "--update",
+            s(&md),
+        ]),
+        "B.md",
+    );
+    assert!(!out.join("results.json").exists(), "nothing was run");
+}
