@@ -15,6 +15,7 @@
 
 pub mod machine;
 pub mod pareto;
+pub mod peer;
 pub mod plot;
 pub mod report;
 pub mod results;
@@ -41,6 +42,13 @@ pub const DEFAULT_REPEATS: usize = 3;
 pub enum BenchError {
     #[error("unknown suite '{0}' (expected one of: quick, paper, full)")]
     UnknownSuite(String),
+    #[error("unknown peer '{0}' (expected: povray)")]
+    UnknownPeer(String),
+    /// The peer renderer is not installed: callers skip the comparison.
+    #[error("{0}")]
+    PeerMissing(String),
+    #[error(transparent)]
+    Peer(#[from] crate::peer::PeerError),
     #[error("--repeats must be at least 1")]
     NoRepeats,
     #[error("--threads must be at least 1")]

@@ -23,7 +23,7 @@ use crate::prepare::{Cache, Prepared};
 use crate::reference::Reference;
 use crate::render::stats::{STAGES, Stage};
 use crate::render::{self, Frame, PrepareTimes};
-use crate::scene::{DEFAULT_OCTREE_CLASSIFY, Scene, Supersampling};
+use crate::scene::{DEFAULT_CLASSIFY, Scene, Supersampling};
 use crate::volume::LoadOptions;
 
 use super::machine;
@@ -99,7 +99,7 @@ fn quality_reference_overrides(overrides: &[String]) -> Vec<String> {
     let mut o = content_overrides(overrides);
     o.extend([
         "render.traversal=octree".to_string(),
-        format!("render.classify={}", DEFAULT_OCTREE_CLASSIFY.name()),
+        format!("render.classify={}", DEFAULT_CLASSIFY.name()),
         "render.supersampling=grid".to_string(),
         format!("render.samples={QUALITY_REFERENCE_SAMPLES}"),
     ]);

@@ -105,6 +105,28 @@ impl Tags {
             .sum()
     }
 
+    /// The smallest box of cells `[lo, hi]` (inclusive) holding every tagged
+    /// cell, or `None` when nothing is tagged. Rays that miss this box can
+    /// skip the traversal altogether.
+    pub fn bounds(&self) -> Option<[[usize; 3]; 2]> {
+        let [nx, ny, _] = self.cells;
+        let mut lo = [usize::MAX; 3];
+        let mut hi = [0usize; 3];
+        for (w, &word) in self.words.iter().enumerate() {
+            let mut bits = word;
+            while bits != 0 {
+                let i = w * 64 + bits.trailing_zeros() as usize;
+                bits &= bits - 1;
+                let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
+                for a in 0..3 {
+                    lo[a] = lo[a].min(c[a]);
+                    hi[a] = hi[a].max(c[a]);
+                }
+            }
+        }
+        (lo[0] <= hi[0]).then_some([lo, hi])
+    }
+
     pub fn words(&self) -> &[u64] {
         &self.words
     }

@@ -6,15 +6,25 @@ use std::time::Duration;
 
 use clap::Args as ClapArgs;
 
-use snell::bench::{self, DEFAULT_REPEATS, Observer, Options, Suite};
+use snell::bench::{self, DEFAULT_REPEATS, Observer, Options, Suite, peer};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
     /// Suite: quick (under 3 minutes on 2 cores), paper (the paper's Tables 1-4
     /// with error columns, about 1.5 hours) or full (paper plus filters, octree
     /// leaf sizes, PRSS variants, about 2 hours).
-    #[arg(long, default_value = "quick")]
-    pub suite: String,
+    /// (default: quick, or none when --peer is given).
+    #[arg(long)]
+    pub suite: Option<String>,
+    /// Compare with a peer renderer on the 64³ glass sphere at 512×512 (POV-Ray
+    /// 3.7's isosurface: `apt-get install povray`), timing both and measuring
+    /// both against the analytic reference; fills the `bench:peer` section of
+    /// --update. Skipped with a message when the peer is not installed.
+    #[arg(long, value_name = "povray")]
+    pub peer: Option<String>,
+    /// Image side of the peer comparison (tests use a small one).
+    #[arg(long, default_value_t = snell::bench::peer::PEER_SIZE, hide = true)]
+    pub peer_size: u32,
     /// Output directory for results.json, results.csv, tables.md and plots.
     #[arg(long, default_value = "bench-out")]
     pub out: PathBuf,
@@ -24,7 +34,7 @@ pub struct Args {
     /// Replace this suite's section of a markdown file (e.g. BENCHMARKS.md).
     #[arg(long, value_name = "BENCHMARKS.md")]
     pub update: Option<PathBuf>,
-    /// Worker threads (default: all cores).
+    /// Worker threads (default: all cores; 2 for each renderer with --peer).
     #[arg(long)]
     pub threads: Option<usize>,
     /// Directory of the scene files.
@@ -33,13 +43,32 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let suite = Suite::by_name(&a.suite)?;
+    let suite = match (&a.suite, &a.peer) {
+        (Some(name), _) => Some(Suite::by_name(name)?),
+        (None, None) => Some(Suite::by_name("quick")?),
+        (None, Some(_)) => None,
+    };
+    if let Some(peer) = &a.peer
+        && !peer::PEERS.contains(&peer.as_str())
+    {
+        return Err(bench::BenchError::UnknownPeer(peer.clone()).into());
+    }
+    if let Some(suite) = suite {
+        run_suite(&a, &suite)?;
+    }
+    if let Some(peer) = &a.peer {
+        run_peer(&a, peer)?;
+    }
+    Ok(())
+}
+
+fn run_suite(a: &Args, suite: &Suite) -> anyhow::Result<()> {
     let opts = Options {
-        scenes_dir: a.scenes,
-        out_dir: a.out,
+        scenes_dir: a.scenes.clone(),
+        out_dir: a.out.clone(),
         repeats: a.repeats,
         threads: a.threads,
-        update: a.update,
+        update: a.update.clone(),
         command: command_line(),
     };
     if !cfg!(debug_assertions) {
@@ -51,11 +80,65 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         eprintln!("warning: debug build: the times mean nothing, use --release");
     }
     let mut bar = Bar::new();
-    let outcome = bench::bench(&suite, &opts, &mut bar)?;
+    let outcome = bench::bench(suite, &opts, &mut bar)?;
     bar.done();
     eprintln!(
         "{} configurations in {}; wrote:",
         outcome.report.configurations.len(),
+        bench::report::fmt_duration(outcome.report.run.total_s)
+    );
+    for p in &outcome.written {
+        eprintln!("  {}", p.display());
+    }
+    for w in &outcome.report.warnings {
+        eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
+fn run_peer(a: &Args, name: &str) -> anyhow::Result<()> {
+    let opts = peer::PeerOptions {
+        scenes_dir: a.scenes.clone(),
+        out_dir: a.out.clone(),
+        repeats: a.repeats,
+        threads: a.threads.unwrap_or(peer::PEER_THREADS),
+        size: a.peer_size,
+        update: a.update.clone(),
+        command: command_line(),
+        snell_exe: std::env::current_exe().ok(),
+    };
+    if opts.size == 0 {
+        anyhow::bail!("--peer-size must be at least 1");
+    }
+    eprintln!(
+        "snell bench --peer {name}: snell and {name} on the glass sphere at {s}x{s}, {} threads each, one warm-up and {} timed runs per row (about 3 minutes at 512x512).",
+        opts.threads,
+        opts.repeats,
+        s = opts.size
+    );
+    if cfg!(debug_assertions) {
+        eprintln!("warning: debug build: snell's times mean nothing, use --release");
+    }
+    let mut bar = Bar::new();
+    let outcome = match peer::peer_bench(name, &opts, &mut bar) {
+        Ok(o) => o,
+        Err(bench::BenchError::PeerMissing(msg)) => {
+            bar.done();
+            eprintln!("skipping the {name} comparison: {msg}");
+            return Ok(());
+        }
+        Err(e) => return Err(e.into()),
+    };
+    bar.done();
+    for x in &outcome.report.ratios {
+        eprintln!(
+            "POV-Ray {} time / snell {} time: {:.2}x per frame, {:.2}x trace / render; p50 error {:.3} (snell) vs {:.3} (POV-Ray) squares",
+            x.povray, x.snell, x.frame, x.render, x.snell_p50, x.povray_p50
+        );
+    }
+    eprintln!(
+        "{} rows in {}; wrote:",
+        outcome.report.rows.len(),
         bench::report::fmt_duration(outcome.report.run.total_s)
     );
     for p in &outcome.written {

@@ -29,6 +29,10 @@ pub struct Args {
     /// Write work counters and per-stage times as JSON.
     #[arg(long, value_name = "STATS.json")]
     pub stats: Option<PathBuf>,
+    /// Write a timeline of the preparation and of every tile's stages per
+    /// thread (Chrome trace format: open it in ui.perfetto.dev or chrome://tracing).
+    #[arg(long, value_name = "TRACE.json")]
+    pub trace: Option<PathBuf>,
     /// Worker threads (default: all cores).
     #[arg(long)]
     pub threads: Option<usize>,
@@ -47,6 +51,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         a.hits.as_ref(),
         a.exr.as_ref(),
         a.stats.as_ref(),
+        a.trace.as_ref(),
     ]
     .into_iter()
     .flatten()
@@ -62,7 +67,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .build()
         .context("cannot start worker threads")?;
 
+    let mut trace = a.trace.as_ref().map(|_| render::Trace::new());
+    let prep_start = Instant::now();
     let prep = pool.install(|| Prepared::for_scene(&scene, &LoadOptions::default()))?;
+    if let Some(t) = &mut trace {
+        t.prepare(prep_start, prep_start.elapsed(), &prep.times);
+    }
     let (lo, hi) = prep
         .volume
         .samples()
@@ -77,14 +87,18 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.scene.display()
         );
     }
-    let frame = pool.install(|| {
-        let tiles = render::tile::tiles(scene.width, scene.height, scene.render.tile).len();
-        let done = AtomicUsize::new(0);
-        std::thread::scope(|s| {
-            let worker = s.spawn(|| render::render(&scene, &prep, Some(&done)));
-            progress_bar(&done, tiles, &worker);
-            worker.join().expect("render thread panicked")
-        })
+    let tiles = render::tile::tiles(scene.width, scene.height, scene.render.tile).len();
+    let done = AtomicUsize::new(0);
+    let frame = std::thread::scope(|s| {
+        // The render runs inside the pool, so --threads sets its tile workers.
+        let worker = s.spawn(|| {
+            pool.install(|| match &mut trace {
+                Some(t) => render::render_traced(&scene, &prep, Some(&done), t),
+                None => render::render(&scene, &prep, Some(&done)),
+            })
+        });
+        progress_bar(&done, tiles, &worker);
+        worker.join().expect("render thread panicked")
     });
 
     frame.film.write_png(&a.output)?;
@@ -105,6 +119,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             w.write_all(b"\n")
         })
         .with_context(|| p.display().to_string())?;
+    }
+    if let (Some(p), Some(t)) = (&a.trace, &trace) {
+        t.write(p).with_context(|| p.display().to_string())?;
     }
     if frame.stats.counters.undefined > 0 {
         eprintln!(

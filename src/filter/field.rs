@@ -179,6 +179,22 @@ impl<T: Coefficient> Field<T> {
         (v, DVec3::new(g[0] * sx, g[1] * sy, g[2] * sz))
     }
 
+    /// [`Field::value_grad`] for many points in structure-of-arrays form:
+    /// `p = [xs, ys, zs]` (grid coordinates, any point), `out = [values, gx,
+    /// gy, gz]`, all the same length.
+    pub fn value_grad_batch(&self, p: [&[f64]; 3], out: [&mut [f64]; 4]) {
+        let n = p[0].len();
+        assert!(p.iter().all(|a| a.len() == n) && out.iter().all(|a| a.len() == n));
+        let [ov, ox, oy, oz] = out;
+        for i in 0..n {
+            let (v, g) = self.value_grad(DVec3::new(p[0][i], p[1][i], p[2][i]));
+            ov[i] = v;
+            ox[i] = g.x;
+            oy[i] = g.y;
+            oz[i] = g.z;
+        }
+    }
+
     /// The `S³` neighbourhood starting at `base`, checked once: every row
     /// `base + j·sy + k·sz .. +S` (j, k < S) lies inside the returned slice.
     #[inline(always)]

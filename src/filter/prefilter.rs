@@ -220,11 +220,29 @@ impl Prefilter {
         if self.is_identity() || dims.contains(&0) {
             return;
         }
+        for axis in 0..3 {
+            self.apply_axis_strided(data, dims, origin, strides, axis);
+        }
+    }
+
+    /// One pass of [`Prefilter::apply_3d_strided`]: filters every line along
+    /// `axis` (0 = x, 1 = y, 2 = z) of the `dims` block at `origin`.
+    pub fn apply_axis_strided(
+        &self,
+        data: &mut [f64],
+        dims: [usize; 3],
+        origin: usize,
+        strides: [usize; 3],
+        axis: usize,
+    ) {
+        if self.is_identity() || dims.contains(&0) {
+            return;
+        }
         let last = origin + (0..3).map(|a| (dims[a] - 1) * strides[a]).sum::<usize>();
         assert!(last < data.len(), "prefilter block exceeds the grid");
-        for axis in 0..3 {
+        {
             if dims[axis] < 2 {
-                continue;
+                return;
             }
             let (b, c) = match axis {
                 0 => (1, 2),

@@ -93,6 +93,8 @@ pub struct Octree {
     /// it — the answer of a descent through `levels`, precomputed, so a
     /// traversal step is one byte load instead of a walk down the tree.
     skip: Vec<u8>,
+    /// Box of cells holding every tag ([`Tags::bounds`]).
+    bounds: Option<[[usize; 3]; 2]>,
 }
 
 /// Marks a tagged cell in the flattened skip map.
@@ -119,12 +121,23 @@ impl Octree {
             levels.push(next);
         }
         let skip = flatten(&tags, &levels);
-        Octree { tags, levels, skip }
+        let bounds = tags.bounds();
+        Octree {
+            tags,
+            levels,
+            skip,
+            bounds,
+        }
     }
 
     /// Height of the tree: the root is level `top()`.
     pub fn top(&self) -> u32 {
         self.levels.len() as u32
+    }
+
+    /// The smallest box of cells holding every tagged cell.
+    pub fn bounds(&self) -> Option<[[usize; 3]; 2]> {
+        self.bounds
     }
 
     pub fn tags(&self) -> &Tags {

@@ -329,6 +329,14 @@ impl PhantomSpec {
             PhantomSpec::MarschnerLobb(m) => m.format,
         }
     }
+
+    /// Samples per axis of the grid [`PhantomSpec::build`] makes.
+    pub fn dims(&self) -> [usize; 3] {
+        match self {
+            PhantomSpec::Sphere(s) => [s.size; 3],
+            PhantomSpec::MarschnerLobb(m) => [m.size; 3],
+        }
+    }
 }
 
 fn dist(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -344,6 +352,14 @@ fn build_grid(
     value: impl Fn([f64; 3]) -> f64 + Sync,
 ) -> Result<Volume, PhantomError> {
     let [nx, ny, nz] = dims;
+    // Refused like a volume file's header would be, before allocating
+    // (`Scene::load_volume` checks first against the caller's own limit).
+    crate::volume::checked_sample_count(
+        std::path::Path::new("phantom"),
+        dims,
+        crate::volume::limits::default_memory_limit(),
+    )
+    .map_err(|e| PhantomError::Invalid(e.to_string().replacen("phantom: ", "", 1)))?;
     let scale = format.full_scale();
     let mut samples = vec![0.0f32; nx * ny * nz];
     samples

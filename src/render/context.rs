@@ -35,6 +35,11 @@ pub struct Ctx<'a> {
     pub inv_spacing: DVec3,
     /// World-space upper corner of the domain (lower corner is the origin).
     pub box_max: DVec3,
+    /// The part of the domain rays must traverse: with precomputed tags, the
+    /// box of tagged cells grown by one cell (so no tagged cell's segment is
+    /// ever clipped by it); else the domain. Empty (`lo > hi`) when nothing is
+    /// tagged. Rays that miss it skip the traversal altogether.
+    pub active: [DVec3; 2],
     pub basis: BernsteinBasis,
     pub skip: Skip<'a>,
     /// Per-cell power-basis patches of the tagged cells, when prepared.
@@ -58,8 +63,21 @@ impl<'a> Ctx<'a> {
             (n[1] - 1) as f64 * spacing.y,
             (n[2] - 1) as f64 * spacing.z,
         );
+        let active = match &prep.accel {
+            Some(a) if scene.render.traversal != Traversal::Step => match a.octree.bounds() {
+                Some([lo, hi]) => {
+                    let off = lattice.offset;
+                    let lo = DVec3::from_array(lo.map(|c| c as f64 - 1.0 - off));
+                    let hi = DVec3::from_array(hi.map(|c| c as f64 + 2.0 - off));
+                    [(lo * spacing).max(DVec3::ZERO), (hi * spacing).min(box_max)]
+                }
+                None => [DVec3::ONE, DVec3::ZERO],
+            },
+            _ => [DVec3::ZERO, box_max],
+        };
         Ctx {
             scene,
+            active,
             field,
             iso: field.separating_iso(scene.surface.iso),
             lattice,
@@ -92,14 +110,17 @@ impl<'a> Ctx<'a> {
     }
 
     /// Parameter interval `[t0, t1]` (with `t0 >= t_min`) where the ray is
-    /// inside the domain box, if any. Slab test with explicit handling of
+    /// inside the active box ([`Ctx::active`]), if any. Slab test with explicit handling of
     /// directions parallel to a face.
     #[inline]
     pub fn clip(&self, o: DVec3, d: DVec3, t_min: f64) -> Option<(f64, f64)> {
+        if self.active[0].cmpgt(self.active[1]).any() {
+            return None;
+        }
         let mut t0 = t_min;
         let mut t1 = f64::INFINITY;
         for a in 0..3 {
-            let (lo, hi) = (0.0, self.box_max[a]);
+            let (lo, hi) = (self.active[0][a], self.active[1][a]);
             if d[a] == 0.0 {
                 if o[a] < lo || o[a] > hi {
                     return None;

@@ -17,6 +17,7 @@ pub mod packet;
 pub mod stages;
 pub mod stats;
 pub mod tile;
+pub mod trace;
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::time::Instant;
@@ -26,6 +27,7 @@ use rayon::prelude::*;
 
 pub use context::Ctx;
 pub use stats::{Counters, PrepareTimes, RenderStats};
+pub use trace::Trace;
 
 use crate::film::{Film, prss};
 pub use crate::prepare::Prepared;
@@ -54,6 +56,27 @@ pub struct Frame {
 /// the hit positions in a final stage; with the `trace` fallback, the pixels it
 /// cannot interpolate get real sub-pixel rays in a second, adaptive pass.
 pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) -> Frame {
+    render_with(scene, prep, progress, None)
+}
+
+/// [`render`], recording a timeline of every tile and stage into `trace`
+/// (see [`trace`]).
+pub fn render_traced(
+    scene: &Scene,
+    prep: &Prepared,
+    progress: Option<&AtomicUsize>,
+    trace: &mut Trace,
+) -> Frame {
+    render_with(scene, prep, progress, Some(trace))
+}
+
+fn render_with(
+    scene: &Scene,
+    prep: &Prepared,
+    progress: Option<&AtomicUsize>,
+    mut trace: Option<&mut Trace>,
+) -> Frame {
+    let traced = trace.is_some();
     let ctx = Ctx::new(scene, prep);
     let rs = &scene.render;
     let n = rs.samples;
@@ -71,7 +94,18 @@ pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) ->
         .map(Region::Rect)
         .collect();
     let start = Instant::now();
-    let outs = trace_regions(&ctx, regions, first, progress);
+    let outs = trace_regions(&ctx, regions, first, progress, traced);
+    if let Some(t) = trace.as_deref_mut() {
+        t.complete(
+            "tiles",
+            "render",
+            trace::MAIN_TID,
+            start,
+            start.elapsed(),
+            serde_json::json!({ "tiles": outs.len() }),
+        );
+        record_tiles(t, &outs, "primary");
+    }
     let mut film = Film::new(scene.width, scene.height);
     let mut stats = RenderStats {
         threads: rayon::current_num_threads(),
@@ -83,6 +117,16 @@ pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) ->
     let film_start = Instant::now();
     absorb(&mut film, &mut stats, &outs, true);
     let mut film_time = film_start.elapsed();
+    if let Some(t) = trace.as_deref_mut() {
+        t.complete(
+            "film",
+            "render",
+            trace::MAIN_TID,
+            film_start,
+            film_time,
+            serde_json::Value::Null,
+        );
+    }
 
     let post_mode = match rs.supersampling {
         Supersampling::Prss => Some(prss::Mode::Prss),
@@ -104,6 +148,16 @@ pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) ->
         stats
             .stage_times
             .add(stats::Stage::Prss, post_start.elapsed());
+        if let Some(t) = trace.as_deref_mut() {
+            t.complete(
+                "prss",
+                "render",
+                trace::MAIN_TID,
+                post_start,
+                post_start.elapsed(),
+                serde_json::json!({ "flagged_pixels": post.flagged.len() }),
+            );
+        }
         if !post.flagged.is_empty() {
             stats.retraced_pixels = post.flagged.len() as u64;
             let regions: Vec<Region> = post
@@ -111,10 +165,36 @@ pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) ->
                 .chunks((rs.tile * rs.tile) as usize)
                 .map(|c| Region::List(c.to_vec()))
                 .collect();
-            let outs = trace_regions(&ctx, regions, Sampling::Grid { n, centre: false }, None);
+            let retrace_start = Instant::now();
+            let outs = trace_regions(
+                &ctx,
+                regions,
+                Sampling::Grid { n, centre: false },
+                None,
+                traced,
+            );
             let t = Instant::now();
             absorb(&mut film, &mut stats, &outs, false);
             film_time += t.elapsed();
+            if let Some(tr) = trace {
+                tr.complete(
+                    "re-trace",
+                    "render",
+                    trace::MAIN_TID,
+                    retrace_start,
+                    t.saturating_duration_since(retrace_start),
+                    serde_json::json!({ "regions": outs.len() }),
+                );
+                record_tiles(tr, &outs, "re-trace");
+                tr.complete(
+                    "film",
+                    "render",
+                    trace::MAIN_TID,
+                    t,
+                    t.elapsed(),
+                    serde_json::Value::Null,
+                );
+            }
         }
     }
     stats.stage_times.add(stats::Stage::Film, film_time);
@@ -128,12 +208,13 @@ fn trace_regions(
     regions: Vec<Region>,
     sampling: Sampling,
     progress: Option<&AtomicUsize>,
+    traced: bool,
 ) -> Vec<tile::TileOut> {
     regions
         .into_par_iter()
         .map_init(Bump::new, |bump, region| {
             bump.reset();
-            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S>(ctx, region, sampling, bump));
+            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S>(ctx, region, sampling, bump, traced));
             if let Some(p) = progress {
                 p.fetch_add(1, Ordering::Relaxed);
             }
@@ -148,5 +229,17 @@ fn absorb(film: &mut Film, stats: &mut RenderStats, outs: &[tile::TileOut], with
         film.blit(o, with_hits);
         stats.counters.add(&o.counters);
         stats.stage_times.merge(&o.times);
+    }
+}
+
+/// Adds traced tiles to the timeline (tiles without a trace are skipped).
+fn record_tiles(trace: &mut Trace, outs: &[tile::TileOut], pass: &str) {
+    for o in outs {
+        let Some(t) = &o.trace else { continue };
+        let label = match &o.region {
+            Region::Rect(r) => format!("tile {},{}", r.x0, r.y0),
+            Region::List(l) => format!("pixels {}..", l.first().copied().unwrap_or(0)),
+        };
+        trace.tile(t, pass, label, o.region.pixels(), &o.counters);
     }
 }

@@ -1,6 +1,6 @@
 //! One tile through the pipeline: the render loop, reading like the algorithm.
 
-use std::time::Instant;
+use std::time::{Duration, Instant};
 
 use bumpalo::Bump;
 use bumpalo::collections::Vec as BVec;
@@ -9,6 +9,7 @@ use super::context::Ctx;
 use super::packet::Rays;
 use super::stages::{entry, generate, record, refract, solve, traverse};
 use super::stats::{Counters, Stage, StageTimes};
+use super::trace::{Span, TileTrace};
 
 /// A rectangle of pixels `[x0, x1) × [y0, y1)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -104,6 +105,9 @@ pub struct TileOut {
     pub color: Vec<[f32; 3]>,
     pub counters: Counters,
     pub times: StageTimes,
+    /// When and on which thread the tile ran, with its stage calls (traced
+    /// renders only).
+    pub trace: Option<TileTrace>,
 }
 
 impl TileOut {
@@ -117,6 +121,7 @@ impl TileOut {
             color: vec![[0.0; 3]; n],
             counters: Counters::default(),
             times: StageTimes::default(),
+            trace: None,
         }
     }
 
@@ -130,29 +135,52 @@ impl TileOut {
     }
 }
 
-/// Runs one stage and charges its time.
+/// Runs one stage and charges its time (and, when tracing, records the call).
 macro_rules! stage {
     ($times:expr, $stage:expr, $call:expr) => {{
         let start = Instant::now();
         let r = $call;
-        $times.add($stage, start.elapsed());
+        $times.add($stage, start, start.elapsed());
         r
     }};
 }
 
+/// Per-stage times of a tile, and its stage calls when the render is traced.
+struct Recorder {
+    times: StageTimes,
+    spans: Option<Vec<Span>>,
+}
+
+impl Recorder {
+    #[inline]
+    fn add(&mut self, stage: Stage, start: Instant, dur: Duration) {
+        self.times.add(stage, dur);
+        if let Some(s) = &mut self.spans {
+            s.push(Span { stage, start, dur });
+        }
+    }
+}
+
 /// Traces every ray of `region` sampled per `sampling`. Scratch comes from
-/// `bump`, which the caller resets between tiles. Never inlined: one call per
-/// tile costs nothing, and profilers get a stable anchor for a tile's work.
+/// `bump`, which the caller resets between tiles; `traced` records when and
+/// where the tile and each stage call ran ([`TileOut::trace`]). Never
+/// inlined: one call per tile costs nothing, and profilers get a stable
+/// anchor for a tile's work.
 #[inline(never)]
 pub fn render_tile<const S: usize>(
     ctx: &Ctx,
     region: Region,
     sampling: Sampling,
     bump: &Bump,
+    traced: bool,
 ) -> TileOut {
+    let tile_start = traced.then(Instant::now);
     let mut out = TileOut::new(region);
     let mut counters = Counters::default();
-    let mut times = StageTimes::default();
+    let mut times = Recorder {
+        times: StageTimes::default(),
+        spans: traced.then(Vec::new),
+    };
     let c = &mut counters;
     let n = out.region.pixels() * generate::rays_per_pixel(sampling);
     let mut rays = Rays::with_capacity_in(n, bump);
@@ -205,7 +233,15 @@ pub fn render_tile<const S: usize>(
         record::record(ctx, &rays, &record_q, &mut out, c)
     );
     out.counters = counters;
-    out.times = times;
+    out.times = times.times;
+    if let (Some(start), Some(spans)) = (tile_start, times.spans) {
+        out.trace = Some(TileTrace {
+            thread: rayon::current_thread_index(),
+            start,
+            end: Instant::now(),
+            spans,
+        });
+    }
     out
 }
 

@@ -54,6 +54,10 @@ impl Camera {
             return Err(CameraError::NotFinite);
         }
         let f = look_at - position;
+        // Finite ends can still be an infinite distance apart (±1e308).
+        if !f.length().is_finite() {
+            return Err(CameraError::NotFinite);
+        }
         if f.length() <= 1e-12 * (1.0 + position.length()) {
             return Err(CameraError::NoDirection);
         }
@@ -76,7 +80,7 @@ impl Camera {
                 }
             }
         }
-        Ok(Camera {
+        let cam = Camera {
             position,
             forward: f,
             right: r,
@@ -84,7 +88,16 @@ impl Camera {
             projection,
             width,
             height,
-        })
+        };
+        // The image corners (an orthographic view can reach past f64 range).
+        let (w, h) = (width as f64, height as f64);
+        for (x, y) in [(0.0, 0.0), (w, h)] {
+            let (o, d) = cam.ray(x, y);
+            if !(o.is_finite() && d.is_finite()) {
+                return Err(CameraError::NotFinite);
+            }
+        }
+        Ok(cam)
     }
 
     /// Ray through continuous image position `(x, y)` (pixel `(px, py)` has its
@@ -178,6 +191,17 @@ mod tests {
         ));
         assert_eq!(
             Camera::new(DVec3::NAN, DVec3::Z, DVec3::Y, p, 4, 4),
+            Err(CameraError::NotFinite)
+        );
+        // Finite ends an infinite distance apart; an orthographic view whose
+        // corners leave the f64 range.
+        assert_eq!(
+            Camera::new(DVec3::splat(-1e308), DVec3::splat(1e308), DVec3::Y, p, 4, 4),
+            Err(CameraError::NotFinite)
+        );
+        let wide = Projection::Orthographic { half_height: 1e308 };
+        assert_eq!(
+            Camera::new(DVec3::X * 1e308, DVec3::ZERO, DVec3::Y, wide, 4, 4),
             Err(CameraError::NotFinite)
         );
     }

@@ -22,12 +22,26 @@ use crate::filter::FilterKind;
 use crate::phantom::PhantomSpec;
 use crate::volume::{Endian, LoadOptions, RawSpec, SampleType, Volume, VolumeError};
 
-/// Classification the octree uses when the scene names none.
-pub const DEFAULT_OCTREE_CLASSIFY: Method = Method::Bezier(2);
+/// Classification the cell traversals (`dda`, `octree`, `distance`) use when
+/// the scene names none; `classify = "none"` makes `dda` bound each visited
+/// cell from its coefficients on the fly instead.
+pub const DEFAULT_CLASSIFY: Method = Method::Bezier(2);
 
 /// Largest image side accepted (and 2^28 pixels in all).
 pub const MAX_IMAGE_SIDE: u32 = 32768;
 const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+
+/// Bytes a frame holds per pixel at its peak: the film (hit position, events,
+/// colour: 24 B), the tiles' outputs before assembly (24 B), the anti-aliasing
+/// colour buffer (12 B), and the copies made to encode PNG and EXR files
+/// (about 27 B), rounded up.
+pub const FRAME_BYTES_PER_PIXEL: u64 = 96;
+/// Bytes of tile scratch per ray: the structure-of-arrays packet (124 B) and
+/// its five stage queues (20 B), rounded up.
+pub const TILE_BYTES_PER_RAY: u64 = 160;
+
+/// Smallest `step` of step traversal, in voxels: bounds the samples per ray.
+pub const MIN_STEP: f64 = 1e-4;
 
 #[derive(Debug, thiserror::Error)]
 pub enum SceneError {
@@ -230,7 +244,8 @@ struct RenderCfg {
     tolerance: f64,
     #[serde(default = "default_tile")]
     tile: u32,
-    /// `none`, `bmcc`, `accc`, `accc2`, `accc4`, `bezier` (see `classify`).
+    /// `none`, `bmcc`, `accc`, `accc2`, `accc4`, `bezier` (see `classify`);
+    /// unset means [`DEFAULT_CLASSIFY`] for cell traversals.
     #[serde(default)]
     classify: Option<String>,
     /// Octree leaf side in cells (a power of two).
@@ -413,10 +428,19 @@ impl Scene {
                 };
                 crate::volume::load(path, &opts)?
             }
-            VolumeSource::Phantom(spec) => spec.build().map_err(|e| SceneError::Phantom {
-                path: self.path.clone(),
-                msg: e.to_string(),
-            })?,
+            VolumeSource::Phantom(spec) => {
+                let phantom_error = |msg: String| SceneError::Phantom {
+                    path: self.path.clone(),
+                    msg,
+                };
+                // Against the caller's limit, before the grid is allocated.
+                crate::volume::checked_sample_count(&self.path, spec.dims(), opts.memory_limit)
+                    .map_err(|e| match e {
+                        VolumeError::TooLarge { msg, .. } => phantom_error(msg),
+                        e => phantom_error(e.to_string()),
+                    })?;
+                spec.build().map_err(|e| phantom_error(e.to_string()))?
+            }
         };
         if let Some(s) = self.spacing {
             vol.set_spacing(s)?;
@@ -427,6 +451,65 @@ impl Scene {
     /// The scene's checker size, if the backdrop is a checkerboard.
     pub fn checker_size(&self) -> Option<f64> {
         self.backdrop.checker_size()
+    }
+
+    /// Most rays one tile traces at once (its packet's capacity).
+    pub fn rays_per_pixel(&self) -> u64 {
+        let n = self.render.samples as u64;
+        match self.render.supersampling {
+            Supersampling::Grid | Supersampling::Jitter => n * n + 1,
+            Supersampling::Prss | Supersampling::Footprint
+                if self.render.prss_fallback == PrssFallback::Trace =>
+            {
+                n * n
+            }
+            _ => 1,
+        }
+    }
+
+    /// Memory a render needs besides the volume: frame buffers for every
+    /// pixel, and one tile's ray packet per worker thread.
+    pub fn memory_need(&self, threads: usize) -> (u64, u64) {
+        let pixels = self.width as u64 * self.height as u64;
+        let tile = self.render.tile as u64;
+        let tile_rays = tile * tile * self.rays_per_pixel();
+        (
+            pixels * FRAME_BYTES_PER_PIXEL,
+            threads.max(1) as u64 * tile_rays * TILE_BYTES_PER_RAY,
+        )
+    }
+
+    /// Refuses (before anything is allocated) a render whose frame buffers
+    /// and tile scratch would exceed `limit` bytes.
+    pub fn check_memory(&self, limit: u64, threads: usize) -> Result<(), SceneError> {
+        let (frame, scratch) = self.memory_need(threads);
+        let need = frame.saturating_add(scratch);
+        if need <= limit {
+            return Ok(());
+        }
+        let hb = crate::volume::limits::human_bytes;
+        Err(SceneError::Key {
+            path: self.path.clone(),
+            key: if scratch > frame {
+                "render.samples"
+            } else {
+                "image"
+            }
+            .into(),
+            msg: format!(
+                "a {}x{} image at {} rays per pixel needs about {} of memory (frame {}, tile scratch {} for {} threads of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples or render.tile, or raise SNELL_MEMORY_LIMIT",
+                self.width,
+                self.height,
+                self.rays_per_pixel(),
+                hb(need),
+                hb(frame),
+                hb(scratch),
+                threads.max(1),
+                self.render.tile,
+                self.render.tile,
+                hb(limit)
+            ),
+        })
     }
 }
 
@@ -692,10 +775,10 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
 
     // [render]
     let r = &f.render;
-    if !(r.step.is_finite() && r.step > 0.0 && r.step <= 16.0) {
+    if !(r.step.is_finite() && (MIN_STEP..=16.0).contains(&r.step)) {
         return Err(bad(
             "render.step",
-            format!("must be in (0, 16] voxels, got {}", r.step),
+            format!("must be in [{MIN_STEP}, 16] voxels, got {}", r.step),
         ));
     }
     if r.max_events == 0 || r.max_events > 100_000 {
@@ -723,9 +806,10 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         ));
     }
     let classify = match r.classify.as_deref() {
-        None if matches!(r.traversal, Traversal::Octree | Traversal::Distance) => {
-            Some(DEFAULT_OCTREE_CLASSIFY)
-        }
+        // Precomputed tags are cheap (tens of ms, cached) and make the cell
+        // walk an order of magnitude faster than bounding every visited cell
+        // on the fly, so every cell traversal uses them unless told `none`.
+        None if r.traversal != Traversal::Step => Some(DEFAULT_CLASSIFY),
         None | Some("none") => None,
         Some(name) => match Method::parse(name) {
             Some(m) if m.is_conservative() => Some(m),
@@ -785,7 +869,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         seed: r.seed,
     };
 
-    Ok(Scene {
+    let scene = Scene {
         path: path.to_path_buf(),
         width: w,
         height: h,
@@ -796,7 +880,11 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         surface,
         backdrop,
         render,
-    })
+    };
+    // Every core may run a tile (the CLI's `--threads` only lowers that).
+    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
+    scene.check_memory(crate::volume::limits::default_memory_limit(), threads)?;
+    Ok(scene)
 }
 
 fn check_color(c: &[f32; 3]) -> Result<(), String> {

@@ -134,9 +134,9 @@ pub fn exit_box(
 /// where it entered, and where it crosses the next boundary on each axis. A
 /// single-cell step is a comparison and two additions; after a jump over an
 /// empty block the state is re-seeded from the new cell.
-struct Dda {
-    cell: [i64; 3],
-    t: f64,
+pub struct Dda {
+    pub cell: [i64; 3],
+    pub t: f64,
     t_max: [f64; 3],
     t_delta: [f64; 3],
     step: [i64; 3],
@@ -144,7 +144,7 @@ struct Dda {
 
 impl Dda {
     #[inline(always)]
-    fn new(ray: &CellRay, cell: [i64; 3], t: f64) -> Dda {
+    pub fn new(ray: &CellRay, cell: [i64; 3], t: f64) -> Dda {
         let mut d = Dda {
             cell,
             t,
@@ -177,13 +177,13 @@ impl Dda {
 
     /// Where the ray leaves the current cell.
     #[inline(always)]
-    fn cell_exit(&self) -> f64 {
+    pub fn cell_exit(&self) -> f64 {
         self.t_max[0].min(self.t_max[1]).min(self.t_max[2])
     }
 
     /// Steps into the next cell along the ray.
     #[inline(always)]
-    fn advance(&mut self) {
+    pub fn advance(&mut self) {
         let a = if self.t_max[0] <= self.t_max[1] {
             if self.t_max[0] <= self.t_max[2] { 0 } else { 2 }
         } else if self.t_max[1] <= self.t_max[2] {

@@ -1,0 +1,66 @@
+//! Steady-state frame time of one scene: prepares once (structures cached, as
+//! in an interactive session), renders a warm-up frame, then `--frames N`
+//! timed frames, and prints the median and spread with the per-stage CPU
+//! profile of the median frame.
+//!
+//! ```sh
+//! cargo bench --bench frame -- scenes/sphere.toml --set render.traversal=octree \
+//!     --set render.supersampling=prss --frames 20
+//! ```
+
+use std::path::PathBuf;
+use std::time::Instant;
+
+use snell::render::{self, Prepared};
+use snell::scene::Scene;
+use snell::volume::LoadOptions;
+
+fn main() {
+    let mut scene_path = PathBuf::from("scenes/sphere.toml");
+    let mut sets = Vec::new();
+    let mut frames = 10usize;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--set" => sets.push(args.next().expect("--set needs a value")),
+            "--frames" => {
+                frames = args
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .expect("--frames N")
+            }
+            "--bench" => {}
+            s if s.ends_with(".toml") => scene_path = PathBuf::from(s),
+            other => panic!("unknown argument {other}"),
+        }
+    }
+    let scene = Scene::load(&scene_path, &sets).unwrap_or_else(|e| panic!("{e}"));
+    let t = Instant::now();
+    let prep =
+        Prepared::for_scene(&scene, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let first = render::render(&scene, &prep, None);
+    println!(
+        "{}: prepare + first frame {:.1} ms ({} threads)",
+        scene_path.display(),
+        t.elapsed().as_secs_f64() * 1e3,
+        rayon::current_num_threads()
+    );
+    drop(first);
+    let mut runs: Vec<(f64, render::RenderStats)> = (0..frames.max(1))
+        .map(|_| {
+            let t = Instant::now();
+            let f = render::render(&scene, &prep, None);
+            (t.elapsed().as_secs_f64() * 1e3, f.stats)
+        })
+        .collect();
+    runs.sort_by(|a, b| a.0.total_cmp(&b.0));
+    let median = &runs[runs.len() / 2];
+    println!(
+        "frame: median {:.2} ms, min {:.2}, max {:.2} over {} frames",
+        median.0,
+        runs[0].0,
+        runs[runs.len() - 1].0,
+        runs.len()
+    );
+    println!("{}", median.1.table());
+}

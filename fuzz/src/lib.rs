@@ -1,0 +1,83 @@
+//! Shared harness code for the fuzz targets: a per-process scratch directory
+//! (the readers take paths, and memory-map or stream their files), small
+//! memory limits so no input can make the process allocate much, and the
+//! invariants every successful load must satisfy.
+
+use std::path::{Path, PathBuf};
+use std::sync::OnceLock;
+
+use snell::volume::{LoadOptions, Volume, VolumeError};
+
+/// Working-set limit for fuzzed volumes: big enough for every seed, small
+/// enough that a hostile header is refused long before libFuzzer's RSS limit.
+pub const MEMORY_LIMIT: u64 = 16 << 20;
+
+/// A directory private to this process (on tmpfs when there is one).
+pub fn scratch() -> &'static Path {
+    static DIR: OnceLock<PathBuf> = OnceLock::new();
+    DIR.get_or_init(|| {
+        let base = Path::new("/dev/shm");
+        let base = if base.is_dir() {
+            base.to_path_buf()
+        } else {
+            std::env::temp_dir()
+        };
+        let dir = base.join(format!("snell-fuzz-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).expect("scratch directory");
+        dir
+    })
+}
+
+/// Writes `bytes` to `name` in the scratch directory.
+pub fn put(name: &str, bytes: &[u8]) -> PathBuf {
+    let p = scratch().join(name);
+    std::fs::write(&p, bytes).expect("scratch write");
+    p
+}
+
+pub fn options(allow_nan: bool) -> LoadOptions {
+    LoadOptions {
+        allow_nan,
+        memory_limit: MEMORY_LIMIT,
+        raw: None,
+    }
+}
+
+/// False when a NRRD header names a data file outside the scratch directory
+/// (an absolute path, a parent directory, a device): the fuzzer must only
+/// ever read the files it wrote.
+pub fn data_file_is_local(header: &[u8]) -> bool {
+    let text = String::from_utf8_lossy(header);
+    !text.lines().any(|l| {
+        let l = l.trim_start().to_ascii_lowercase();
+        (l.starts_with("data file") || l.starts_with("datafile"))
+            && (l.contains('/') || l.contains('\\') || l.contains(".."))
+    })
+}
+
+/// What every load must give: a consistent volume of finite samples, or an
+/// error whose one-line message names the file it is about.
+pub fn check_load(path: &Path, res: Result<Volume, VolumeError>) {
+    match res {
+        Ok(v) => {
+            let d = v.dims();
+            assert!(d.iter().all(|&n| n > 0), "zero dim {d:?}");
+            assert_eq!(v.samples().len(), d[0] * d[1] * d[2], "sample count");
+            assert!(
+                v.spacing().iter().all(|s| s.is_finite() && *s > 0.0),
+                "spacing {:?}",
+                v.spacing()
+            );
+            assert!(
+                v.samples().iter().all(|s| s.is_finite()),
+                "non-finite sample survived loading"
+            );
+        }
+        Err(e) => {
+            let msg = e.to_string();
+            let name = path.file_name().unwrap().to_string_lossy();
+            assert!(msg.contains(&*name), "error does not name the file: {msg}");
+            assert!(!msg.is_empty());
+        }
+    }
+}
