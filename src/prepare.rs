@@ -79,7 +79,7 @@ impl Accel {
             // SNELL_NO_PATCHES=1 restricts from the coefficients (comparisons).
             let disabled = std::env::var_os("SNELL_NO_PATCHES").is_some();
             (!disabled && Patches::bytes_for(tags, field.kernel().support()) <= PATCH_BUDGET)
-                .then(|| Patches::build(field, tags))
+                .then(|| Patches::build(field, tags, field.separating_iso(self.iso)))
         });
         (
             p.as_ref(),

@@ -45,29 +45,20 @@ pub fn bernstein_weights(field: &Field) -> Vec<f64> {
     beta
 }
 
-/// Applies `β` along `axis` of an `s³` tensor (x fastest).
-fn transform(src: &[f64], s: usize, axis: usize, beta: &[f64]) -> Vec<f64> {
-    let stride = [1, s, s * s][axis];
-    let mut out = vec![0.0; s * s * s];
-    for (idx, o) in out.iter_mut().enumerate() {
-        let p = (idx / stride) % s;
-        let base = idx - p * stride;
-        let mut acc = 0.0;
-        for i in 0..s {
-            acc += src[base + i * stride] * beta[i * s + p];
-        }
-        *o = acc;
-    }
-    out
-}
-
-/// Tensor Bernstein coefficients of `f - iso` over a cell.
+/// Tensor Bernstein coefficients of `f - iso` over a cell: `β` applied
+/// along x, y and z of the cell's coefficient neighbourhood.
 pub fn cell_bernstein(field: &Field, cell: [i64; 3], iso: f64, beta: &[f64]) -> Vec<f64> {
-    let s = field.kernel().support();
     let c = support_minus_iso(field, cell, iso);
-    let x = transform(&c, s, 0, beta);
-    let y = transform(&x, s, 1, beta);
-    transform(&y, s, 2, beta)
+    crate::with_support!(field.kernel().support(), S => {
+        // m[p][i] = β[i][p]: row p of the map from coefficients to Bernstein.
+        let m: [[f64; S]; S] = std::array::from_fn(|p| std::array::from_fn(|i| beta[i * S + p]));
+        let mut x = vec![0.0; S * S * S];
+        let mut y = vec![0.0; S * S * S];
+        apply_axis::<S>(&c, &mut x, 1, &m);
+        apply_axis::<S>(&x, &mut y, S, &m);
+        apply_axis::<S>(&y, &mut x, S * S, &m);
+        x
+    })
 }
 
 /// de Casteljau split at 1/2 along `axis`.
@@ -94,6 +85,154 @@ fn split(b: &[f64], s: usize, axis: usize) -> (Vec<f64>, Vec<f64>) {
         }
     }
     (left, right)
+}
+
+/// Sub-cells per axis of a [`SubCells::mask`]: 4³ = 64, one bit each.
+pub const SUB: usize = 4;
+
+/// Which of a cell's `4³` sub-cells can hold the iso-surface, from the Bézier
+/// hull of each sub-cell's own patch: a finer classification below the cell
+/// lattice, one `u64` per tagged cell. Bit `i + 4(j + 4k)` covers local
+/// coordinates `[i/4, (i+1)/4] × [j/4, (j+1)/4] × [k/4, (k+1)/4]`.
+///
+/// A ray segment through a tagged cell that meets no tagged sub-cell holds no
+/// crossing, so the traversal skips it without a solve; otherwise only the
+/// part from the first to the last tagged sub-cell is solved.
+pub struct SubCells {
+    s: usize,
+    /// Scratch tensors (reused between cells, never read before written).
+    halves: Vec<f64>,
+    quarters: Vec<f64>,
+    x: Vec<f64>,
+    y: Vec<f64>,
+}
+
+/// Largest `S³` tensor (degree-7 B-spline).
+const MAX_TENSOR: usize = 512;
+
+impl SubCells {
+    pub fn new(support: usize) -> SubCells {
+        SubCells {
+            s: support,
+            halves: vec![0.0; 8 * MAX_TENSOR],
+            quarters: vec![0.0; 8 * MAX_TENSOR],
+            x: vec![0.0; 2 * MAX_TENSOR],
+            y: vec![0.0; 4 * MAX_TENSOR],
+        }
+    }
+
+    /// The sub-cell mask of a cell with tensor Bernstein coefficients `b` of
+    /// `f - iso` ([`cell_bernstein`]); `eps` is the rounding slack of
+    /// [`decide`]. Two levels of de Casteljau halving (the same arithmetic as
+    /// [`decide`]'s), pruned where a half-cell's hull already excludes the
+    /// iso-value.
+    pub fn mask(&mut self, b: &[f64], eps: f64) -> u64 {
+        crate::with_support!(self.s, S => self.mask_s::<S>(b, eps))
+    }
+
+    fn mask_s<const S: usize>(&mut self, b: &[f64], eps: f64) -> u64 {
+        let n = S * S * S;
+        let straddles = |v: &[f64]| {
+            let (mut above, mut below) = (false, false);
+            for &x in &v[..n] {
+                above |= x > -eps;
+                below |= x <= eps;
+            }
+            above && below
+        };
+        if !straddles(b) {
+            return 0;
+        }
+        let mut mask = 0u64;
+        let (x, y) = (&mut self.x, &mut self.y);
+        octants::<S>(b, x, y, &mut self.halves);
+        for h in 0..8 {
+            let half = &self.halves[h * n..(h + 1) * n];
+            if !straddles(half) {
+                continue;
+            }
+            octants::<S>(half, x, y, &mut self.quarters);
+            let (hx, hy, hz) = (h & 1, h >> 1 & 1, h >> 2);
+            for q in 0..8 {
+                if straddles(&self.quarters[q * n..(q + 1) * n]) {
+                    let (i, j, k) = (2 * hx + (q & 1), 2 * hy + (q >> 1 & 1), 2 * hz + (q >> 2));
+                    mask |= 1 << (i + SUB * (j + SUB * k));
+                }
+            }
+        }
+        mask
+    }
+}
+
+/// The 8 half-size children of an `S³` Bernstein patch into `out` (child
+/// `x + 2y + 4z` at `out[child·S³..]`), through scratch `x` (2 tensors) and
+/// `y` (4 tensors).
+#[inline]
+fn octants<const S: usize>(b: &[f64], x: &mut [f64], y: &mut [f64], out: &mut [f64]) {
+    let n = S * S * S;
+    let (x0, x1) = x[..2 * n].split_at_mut(n);
+    halve_into::<S>(&b[..n], 1, x0, x1);
+    for (i, xi) in [&*x0, &*x1].into_iter().enumerate() {
+        // y child index i + 2·(upper half in y)
+        let (lo, hi) = y[..4 * n].split_at_mut(2 * n);
+        halve_into::<S>(
+            xi,
+            S,
+            &mut lo[i * n..(i + 1) * n],
+            &mut hi[i * n..(i + 1) * n],
+        );
+    }
+    let (lo, hi) = out[..8 * n].split_at_mut(4 * n);
+    for i in 0..4 {
+        halve_into::<S>(
+            &y[i * n..(i + 1) * n],
+            S * S,
+            &mut lo[i * n..(i + 1) * n],
+            &mut hi[i * n..(i + 1) * n],
+        );
+    }
+}
+
+/// de Casteljau at 1/2 along the axis of `stride` (1, S or S²) of an `S³`
+/// tensor: `left` covers `[0, 1/2]`, `right` `[1/2, 1]` on that axis.
+#[inline(always)]
+fn halve_into<const S: usize>(src: &[f64], stride: usize, left: &mut [f64], right: &mut [f64]) {
+    let outer = S * S * S / (stride * S);
+    for o in 0..outer {
+        for inner in 0..stride {
+            let base = o * stride * S + inner;
+            let mut w: [f64; S] = std::array::from_fn(|q| src[base + q * stride]);
+            left[base] = w[0];
+            right[base + (S - 1) * stride] = w[S - 1];
+            for r in 1..S {
+                for i in 0..S - r {
+                    w[i] = 0.5 * (w[i] + w[i + 1]);
+                }
+                left[base + r * stride] = w[0];
+                right[base + (S - 1 - r) * stride] = w[S - 1 - r];
+            }
+        }
+    }
+}
+
+/// `dst = m · src` along the axis of `stride` (1, S or S²) of an `S³` tensor.
+#[inline(always)]
+fn apply_axis<const S: usize>(src: &[f64], dst: &mut [f64], stride: usize, m: &[[f64; S]; S]) {
+    let (src, dst) = (&src[..S * S * S], &mut dst[..S * S * S]);
+    let outer = S * S * S / (stride * S);
+    for o in 0..outer {
+        for inner in 0..stride {
+            let base = o * stride * S + inner;
+            let line: [f64; S] = std::array::from_fn(|q| src[base + q * stride]);
+            for (r, row) in m.iter().enumerate() {
+                let mut acc = 0.0;
+                for q in 0..S {
+                    acc += row[q] * line[q];
+                }
+                dst[base + r * stride] = acc;
+            }
+        }
+    }
 }
 
 /// Decides a Bernstein patch, subdividing up to `depth` times.
@@ -173,6 +312,63 @@ mod tests {
     use crate::filter::FilterKind;
     use crate::volume::{SampleType, Volume};
     use glam::DVec3;
+
+    #[test]
+    fn sub_cell_masks_hold_every_sign_change() {
+        // Every pair of nearby points on opposite sides of the iso-value must
+        // lie in sub-cells the mask keeps (the segment between them crosses).
+        let dims = [8usize, 7, 9];
+        let s: Vec<f32> = (0..dims.iter().product::<usize>())
+            .map(|i| ((i * 7919 + 5) % 251) as f32)
+            .collect();
+        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        for name in ["linear", "catmull-rom", "bspline2", "bspline3", "bspline5"] {
+            let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
+            let lat = Lattice::new(f.kernel(), dims);
+            let beta = bernstein_weights(&f);
+            let mut sub = SubCells::new(f.kernel().support());
+            let iso = f.separating_iso(125.0);
+            let origin_of = |c: [i64; 3]| c.map(|c| c as f64 - lat.offset);
+            let (mut kept, mut total, mut sign_changes) = (0, 0, 0);
+            for cell in [[2i64, 2, 2], [3, 1, 4], [1, 3, 3], [4, 2, 5]] {
+                let b = cell_bernstein(&f, cell, iso, &beta);
+                let mask = sub.mask(&b, 1e-9);
+                kept += mask.count_ones();
+                total += 64;
+                let o = origin_of(cell);
+                // 8³ points per sub-cell lattice: a sign change between two
+                // neighbours inside one sub-cell needs that sub-cell tagged.
+                let m = 4 * SUB;
+                let val = |i: usize, j: usize, k: usize| {
+                    f.value(DVec3::new(
+                        o[0] + i as f64 / m as f64,
+                        o[1] + j as f64 / m as f64,
+                        o[2] + k as f64 / m as f64,
+                    )) - iso
+                };
+                for k in 0..m {
+                    for j in 0..m {
+                        for i in 0..m {
+                            let a = val(i, j, k);
+                            let bit = i / 4 + SUB * (j / 4 + SUB * (k / 4));
+                            for (di, dj, dk) in [(1, 0, 0), (0, 1, 0), (0, 0, 1)] {
+                                let (ni, nj, nk) = (i + di, j + dj, k + dk);
+                                if ni / 4 != i / 4 || nj / 4 != j / 4 || nk / 4 != k / 4 {
+                                    continue;
+                                }
+                                if (a > 0.0) != (val(ni, nj, nk) > 0.0) {
+                                    sign_changes += 1;
+                                    assert!(mask >> bit & 1 == 1, "{name} {cell:?} sub-cell {bit}");
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            assert!(sign_changes > 0, "{name}: the test must see crossings");
+            assert!(kept < total, "{name}: the mask must exclude something");
+        }
+    }
 
     #[test]
     fn bernstein_corners_are_field_values_and_hull_bounds() {

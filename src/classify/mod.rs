@@ -138,7 +138,7 @@ pub fn classify(field: &Field, iso: f64, method: Method) -> Classification {
 }
 
 /// Slack that keeps bounds conservative under summation rounding.
-fn slack(field: &Field) -> f64 {
+pub(crate) fn slack(field: &Field) -> f64 {
     1e-12 * field.max_abs_coeff().max(1.0)
 }
 

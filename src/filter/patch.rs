@@ -15,8 +15,10 @@
 use rayon::prelude::*;
 
 use super::Field;
-use super::kernel::MAX_SUPPORT;
 use crate::classify::Tags;
+use crate::classify::bezier::{SubCells, bernstein_weights, cell_bernstein};
+use crate::classify::slack;
+use crate::lattice::Bricked;
 use crate::roots::bernstein::MAX_DEGREE;
 use crate::simd::Madd;
 
@@ -67,24 +69,36 @@ pub fn patch_lanes<const S: usize, const L: usize, M: Madd>(
         }
     }
     // x: b[m, j, k] = Σ_i a[i, j, k] P[i][m]; then y into a; then z into b.
-    let pass = |src: &[[f64; L]], dst: &mut [[f64; L]], stride: usize| {
-        for (o, d) in dst.iter_mut().enumerate() {
-            let m = (o / stride) % S;
-            let base = o - m * stride;
-            let mut acc = [0.0f64; L];
-            for i in 0..S {
-                let w = weights[i * S + m];
-                let v = &src[base + i * stride];
-                for l in 0..L {
-                    acc[l] = M::madd(v[l], w, acc[l]);
+    // A plain function marked inline(always), not a closure: closures are not
+    // inlined reliably, and outside the caller's `target_feature` context the
+    // multiply-adds would become library calls.
+    #[inline(always)]
+    fn pass<const S: usize, const L: usize, M: Madd>(
+        weights: &[f64],
+        src: &[[f64; L]],
+        dst: &mut [[f64; L]],
+        stride: usize,
+    ) {
+        for o in 0..S * S * S / (stride * S) {
+            for inner in 0..stride {
+                let base = o * stride * S + inner;
+                for m in 0..S {
+                    let mut acc = [0.0f64; L];
+                    for i in 0..S {
+                        let w = weights[i * S + m];
+                        let v = &src[base + i * stride];
+                        for l in 0..L {
+                            acc[l] = M::madd(v[l], w, acc[l]);
+                        }
+                    }
+                    dst[base + m * stride] = acc;
                 }
             }
-            *d = acc;
         }
-    };
-    pass(a, b, 1);
-    pass(b, a, S);
-    pass(a, b, S * S);
+    }
+    pass::<S, L, M>(weights, a, b, 1);
+    pass::<S, L, M>(weights, b, a, S);
+    pass::<S, L, M>(weights, a, b, S * S);
     a.copy_from_slice(b);
 }
 
@@ -92,42 +106,62 @@ pub fn patch_lanes<const S: usize, const L: usize, M: Madd>(
 #[derive(Clone, Debug)]
 pub struct Patches {
     support: usize,
-    cells: [usize; 3],
-    /// Tagged cells before each 64-bit word of the tag bitset.
+    /// The tag bitset in 4³ bricks, one word per brick ([`Bricked`]), and
+    /// the tagged cells before each word: patches of nearby cells sit
+    /// together, and finding one is a popcount.
+    bricked: Bricked,
     rank: Vec<u32>,
     words: Vec<u64>,
     /// `support³` coefficients per tagged cell, `a[p + S(q + S r)]`.
     data: Vec<f64>,
+    /// Per tagged cell, which of its 4³ sub-cells can hold the iso-surface
+    /// ([`SubCells`]).
+    masks: Vec<u64>,
 }
 
 impl Patches {
     /// Bytes the patches of `tags` would take (to check a memory budget first).
     pub fn bytes_for(tags: &Tags, support: usize) -> usize {
-        tags.count() * support.pow(3) * 8 + tags.words().len() * 12
+        tags.count() * (support.pow(3) * 8 + 8) + Bricked::new(tags.cells).len() / 64 * 12
     }
 
-    /// Patches of every tagged cell, computed with the lane routine of the
-    /// running instruction set (so they match on-the-fly patches bit for bit).
-    pub fn build(field: &Field, tags: &Tags) -> Patches {
+    /// Patches and sub-cell masks of every tagged cell for the (separated)
+    /// iso-value `iso`, computed with the lane routine of the running
+    /// instruction set (so they match on-the-fly patches bit for bit).
+    pub fn build(field: &Field, tags: &Tags, iso: f64) -> Patches {
         let s = field.kernel().support();
-        let words = tags.words().to_vec();
+        let bricked = Bricked::new(tags.cells);
+        let mut words = vec![0u64; bricked.len() / 64];
+        words.par_iter_mut().enumerate().for_each(|(brick, w)| {
+            for k in 0..64 {
+                let c = bricked.cell(brick * 64 + k);
+                if (0..3).all(|a| c[a] < tags.cells[a]) && tags.get(c.map(|v| v as i64)) {
+                    *w |= 1 << k;
+                }
+            }
+        });
         let mut rank = Vec::with_capacity(words.len());
         let mut acc = 0u32;
         for w in &words {
             rank.push(acc);
             acc += w.count_ones();
         }
-        let [nx, ny, _] = tags.cells;
         let s3 = s * s * s;
-        let cells: Vec<usize> = (0..tags.len()).filter(|&i| tags.get_index(i)).collect();
+        // Tagged cells in slot order (brick by brick).
+        let cells: Vec<usize> = words
+            .iter()
+            .enumerate()
+            .flat_map(|(brick, &w)| {
+                (0..64)
+                    .filter(move |k| w >> k & 1 == 1)
+                    .map(move |k| brick * 64 + k)
+            })
+            .collect();
         let weights = weight_matrix(field);
         let lead = ((s - 1) / 2) as i64;
+        let cell_of = |slot: usize| bricked.cell(slot).map(|v| v as i64);
         let base_of = |idx: usize| {
-            let cell = [
-                (idx % nx) as i64,
-                (idx / nx % ny) as i64,
-                (idx / (nx * ny)) as i64,
-            ];
+            let cell = cell_of(idx);
             field.coeffs().offset(
                 (cell[0] - lead) as isize,
                 (cell[1] - lead) as isize,
@@ -152,19 +186,35 @@ impl Patches {
                     }
                 }))
             });
+        let beta = bernstein_weights(field);
+        let eps = slack(field);
+        let masks = cells
+            .par_iter()
+            .map_init(
+                || SubCells::new(s),
+                |sub, &slot| sub.mask(&cell_bernstein(field, cell_of(slot), iso, &beta), eps),
+            )
+            .collect();
         Patches {
             support: s,
-            cells: tags.cells,
+            bricked,
             rank,
             words,
             data,
+            masks,
         }
+    }
+
+    /// The sub-cell mask of the patch in `slot` ([`Patches::slot`]).
+    #[inline(always)]
+    pub fn mask(&self, slot: usize) -> u64 {
+        self.masks[slot]
     }
 
     /// The patch of cell `c`, if tagged.
     #[inline(always)]
     pub fn slot(&self, c: [i64; 3]) -> Option<usize> {
-        let i = c[0] as usize + self.cells[0] * (c[1] as usize + self.cells[1] * c[2] as usize);
+        let i = self.bricked.index(c);
         let (w, b) = (i >> 6, i & 63);
         let word = self.words[w];
         if (word >> b) & 1 == 0 {
@@ -174,7 +224,7 @@ impl Patches {
     }
 
     pub fn bytes(&self) -> usize {
-        self.data.len() * 8 + self.rank.len() * 4 + self.words.len() * 8
+        self.data.len() * 8 + self.masks.len() * 8 + self.rank.len() * 4 + self.words.len() * 8
     }
 
     /// Copies the patches of `slots` into lane layout.
@@ -196,9 +246,14 @@ impl Patches {
 }
 
 /// `g(s) = f(τ0 + sΔ) - iso` for `L` segments from their cells' patches
-/// (lane layout, [`patch_lanes`]): a Horner scheme in x for every `(q, r)`,
-/// then in y, then in z, each step multiplying a polynomial in `s` by a
-/// linear one.
+/// (lane layout, [`patch_lanes`]).
+///
+/// With `X_p(s) = (τx + Δx·s)^p` expanded once per lane into a table of
+/// monomial coefficients (and likewise `Y_q`, `Z_r`), the restriction is
+/// three contractions, `Σ_p a_pqr X_p`, then `Σ_q · Y_q`, then `Σ_r · Z_r`,
+/// each a product of polynomials whose degrees are fixed by `S` alone: every
+/// loop bound is a compile-time constant, so the whole routine unrolls into
+/// straight-line multiply-adds over lanes (about 390 per lane for cubic).
 #[inline(always)]
 pub fn restrict_patch_lanes<const S: usize, const L: usize, M: Madd>(
     patch: &[[f64; L]],
@@ -207,66 +262,58 @@ pub fn restrict_patch_lanes<const S: usize, const L: usize, M: Madd>(
     iso: f64,
     out: &mut [[f64; L]; N],
 ) {
-    let d1 = S - 1;
-    // poly ← poly·(x0 + dx·s) + a, `poly` of degree `deg` before the step.
-    #[inline(always)]
-    fn step<const L: usize, M: Madd>(
-        poly: &mut [[f64; L]],
-        deg: usize,
-        x0: &[f64; L],
-        dx: &[f64; L],
-    ) {
-        poly[deg + 1] = [0.0; L];
-        for k in (0..=deg + 1).rev() {
-            for l in 0..L {
-                let lower = if k > 0 { poly[k - 1][l] } else { 0.0 };
-                poly[k][l] = M::madd(lower, dx[l], poly[k][l] * x0[l]);
+    let patch = &patch[..S * S * S];
+    // pw[a][p][k]: coefficient of s^k in (τa + Δa·s)^p (zero for k > p).
+    let mut pw = [[[[0.0f64; L]; S]; S]; 3];
+    for a in 0..3 {
+        pw[a][0][0] = [1.0; L];
+        for p in 1..S {
+            for k in 0..=p {
+                let mut v = [0.0f64; L];
+                for l in 0..L {
+                    let keep = if k < p { pw[a][p - 1][k][l] } else { 0.0 };
+                    let lift = if k > 0 { pw[a][p - 1][k - 1][l] } else { 0.0 };
+                    v[l] = M::madd(lift, delta[a][l], keep * tau[a][l]);
+                }
+                pw[a][p][k] = v;
             }
         }
     }
-    let mut zr = [[0.0f64; L]; N];
-    for r in (0..S).rev() {
-        let mut yq = [[0.0f64; L]; 2 * MAX_SUPPORT - 1];
-        for q in (0..S).rev() {
-            // P_qr(s) = Σ_p a_pqr X(s)^p
-            let mut px = [[0.0f64; L]; MAX_SUPPORT];
-            px[0] = patch[(S - 1) + S * (q + S * r)];
-            for (deg, p) in (0..S - 1).rev().enumerate() {
-                step::<L, M>(&mut px, deg, &tau[0], &delta[0]);
+    let d1 = S - 1;
+    let mut g = [[0.0f64; L]; N];
+    for r in 0..S {
+        // Q_r(s) = Σ_q Y_q(s) Σ_p a_pqr X_p(s), degree 2(S-1).
+        let mut qr = [[0.0f64; L]; N];
+        for q in 0..S {
+            let mut px = [[0.0f64; L]; S];
+            for p in 0..S {
                 let a = &patch[p + S * (q + S * r)];
-                for l in 0..L {
-                    px[0][l] += a[l];
+                for k in 0..=p {
+                    for l in 0..L {
+                        px[k][l] = M::madd(a[l], pw[0][p][k][l], px[k][l]);
+                    }
                 }
             }
-            // Q_r ← Q_r·Y + P_qr
-            if q == S - 1 {
-                yq[..=d1].copy_from_slice(&px[..=d1]);
-            } else {
-                step::<L, M>(&mut yq, d1 + (S - 2 - q), &tau[1], &delta[1]);
-                for k in 0..=d1 {
+            for j in 0..=q {
+                for k in 0..S {
                     for l in 0..L {
-                        yq[k][l] += px[k][l];
+                        qr[k + j][l] = M::madd(px[k][l], pw[1][q][j][l], qr[k + j][l]);
                     }
                 }
             }
         }
-        // g ← g·Z + Q_r
-        let deg_q = 2 * d1;
-        if r == S - 1 {
-            zr[..=deg_q].copy_from_slice(&yq[..=deg_q]);
-        } else {
-            step::<L, M>(&mut zr, deg_q + (S - 2 - r), &tau[2], &delta[2]);
-            for k in 0..=deg_q {
+        for j in 0..=r {
+            for m in 0..=2 * d1 {
                 for l in 0..L {
-                    zr[k][l] += yq[k][l];
+                    g[m + j][l] = M::madd(qr[m][l], pw[2][r][j][l], g[m + j][l]);
                 }
             }
         }
     }
     for l in 0..L {
-        zr[0][l] -= iso;
+        g[0][l] -= iso;
     }
-    *out = zr;
+    *out = g;
 }
 
 #[cfg(test)]
@@ -290,7 +337,7 @@ mod tests {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             let iso = f.separating_iso(120.0);
             let tags = classify(&f, iso, Method::Bmcc).tags;
-            let patches = Patches::build(&f, &tags);
+            let patches = Patches::build(&f, &tags, iso);
             let lat = Lattice::new(f.kernel(), dims);
             let off = lat.offset;
             let mut checked = 0;

@@ -19,6 +19,7 @@ use rayon::prelude::*;
 pub use distance::Proximity;
 
 use crate::classify::Tags;
+use crate::lattice::Bricked;
 
 /// Occupancy bits of one level.
 #[derive(Clone, Debug)]
@@ -92,7 +93,9 @@ pub struct Octree {
     /// Per cell: [`TAGGED`], or the level of the largest empty block holding
     /// it — the answer of a descent through `levels`, precomputed, so a
     /// traversal step is one byte load instead of a walk down the tree.
+    /// Stored in 4³ bricks ([`Bricked`]) for locality along rays.
     skip: Vec<u8>,
+    bricked: Bricked,
     /// Box of cells holding every tag ([`Tags::bounds`]).
     bounds: Option<[[usize; 3]; 2]>,
 }
@@ -120,12 +123,14 @@ impl Octree {
             dims = next.dims;
             levels.push(next);
         }
-        let skip = flatten(&tags, &levels);
+        let bricked = Bricked::new(tags.cells);
+        let skip = flatten(&tags, &levels, &bricked);
         let bounds = tags.bounds();
         Octree {
             tags,
             levels,
             skip,
+            bricked,
             bounds,
         }
     }
@@ -150,12 +155,17 @@ impl Octree {
             + self.skip.len()
     }
 
+    /// The flattened map's byte for cell `c` (in range): [`TAGGED`], or the
+    /// level of the largest empty block holding it.
+    #[inline(always)]
+    pub fn skip_byte(&self, c: [i64; 3]) -> u8 {
+        self.skip[self.bricked.index(c)]
+    }
+
     /// [`Octree::skip_level`] from the flattened map: one load.
     #[inline(always)]
     pub fn skip_level_fast(&self, c: [i64; 3], leaf_level: u32) -> Option<u32> {
-        let n = self.tags.cells;
-        let i = c[0] as usize + n[0] * (c[1] as usize + n[1] * c[2] as usize);
-        match self.skip[i] {
+        match self.skip[self.bricked.index(c)] {
             TAGGED => None,
             l if (l as u32) < leaf_level.max(1) => Some(0),
             l => Some(l as u32),
@@ -188,31 +198,29 @@ impl Octree {
 
 /// Per cell, the level of the largest empty aligned block holding it (the
 /// largest `l` whose block at every level up to `l` is empty), or `TAGGED`.
-fn flatten(tags: &Tags, levels: &[Level]) -> Vec<u8> {
-    let [nx, ny, nz] = tags.cells;
+fn flatten(tags: &Tags, levels: &[Level], bricked: &Bricked) -> Vec<u8> {
     let top = levels.len();
-    let slabs: Vec<Vec<u8>> = (0..nz)
-        .into_par_iter()
-        .map(|z| {
-            let mut out = vec![0u8; nx * ny];
-            for y in 0..ny {
-                for x in 0..nx {
-                    let c = [x, y, z];
-                    out[x + nx * y] = if tags.get([x as i64, y as i64, z as i64]) {
-                        TAGGED
-                    } else {
-                        let mut l = 0;
-                        while l < top && !levels[l].get(c.map(|v| v >> (l + 1))) {
-                            l += 1;
-                        }
-                        l as u8
-                    };
+    let mut skip = vec![0u8; bricked.len()];
+    skip.par_chunks_mut(64)
+        .enumerate()
+        .for_each(|(brick, out)| {
+            for (k, o) in out.iter_mut().enumerate() {
+                let c = bricked.cell(brick * 64 + k);
+                if (0..3).any(|a| c[a] >= tags.cells[a]) {
+                    continue; // padding: never visited
                 }
+                *o = if tags.get(c.map(|v| v as i64)) {
+                    TAGGED
+                } else {
+                    let mut l = 0;
+                    while l < top && !levels[l].get(c.map(|v| v >> (l + 1))) {
+                        l += 1;
+                    }
+                    l as u8
+                };
             }
-            out
-        })
-        .collect();
-    slabs.concat()
+        });
+    skip
 }
 
 #[cfg(test)]

@@ -88,7 +88,7 @@ impl<'a> Ctx<'a> {
             skip: match (&prep.accel, scene.render.traversal) {
                 (Some(a), Traversal::Octree) => Skip::Octree {
                     tree: &a.octree,
-                    leaf_level: scene.render.leaf.max(1).ilog2(),
+                    leaf_level: scene.render.leaf.max(1).ilog2().max(1),
                 },
                 (Some(a), Traversal::Dda) => Skip::Octree {
                     tree: &a.octree,

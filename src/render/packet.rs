@@ -44,6 +44,12 @@ pub struct Rays<'a> {
     pub seg_end: BVec<'a, f64>,
     /// Field minus iso at `t` and `seg_end` (step traversal's bracket).
     pub seg_g: [BVec<'a, f64>; 2],
+    /// The current piece in knot-cell coordinates (grid + lattice offset):
+    /// origin, direction and the direction's reciprocal (0 where it is 0),
+    /// set once per piece so the cell walk never divides.
+    pub cell_org: [BVec<'a, f64>; 3],
+    pub cell_dir: [BVec<'a, f64>; 3],
+    pub cell_inv: [BVec<'a, f64>; 3],
     /// Current knot cell (cell traversal).
     pub cell: [BVec<'a, i32>; 3],
     /// The traversal must first step past `cell` (its solve found nothing).
@@ -68,6 +74,9 @@ impl<'a> Rays<'a> {
             t_end: f(),
             seg_end: f(),
             seg_g: [f(), f()],
+            cell_org: [f(), f(), f()],
+            cell_dir: [f(), f(), f()],
+            cell_inv: [f(), f(), f()],
             cell: [
                 BVec::with_capacity_in(n, bump),
                 BVec::with_capacity_in(n, bump),
@@ -98,6 +107,9 @@ impl<'a> Rays<'a> {
             self.org[a].push(org[a]);
             self.dir[a].push(dir[a]);
             self.cell[a].push(0);
+            self.cell_org[a].push(0.0);
+            self.cell_dir[a].push(0.0);
+            self.cell_inv[a].push(0.0);
         }
         self.t.push(0.0);
         self.t_start.push(0.0);

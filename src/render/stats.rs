@@ -57,6 +57,9 @@ pub struct Counters {
     pub rays_entering: u64,
     /// Cells (or octree nodes) the traversal examined.
     pub cells_visited: u64,
+    /// Tagged cells passed without a solve: the ray meets none of their
+    /// tagged sub-cells ([`crate::classify::bezier::SubCells`]).
+    pub subcell_skips: u64,
     /// Cells whose crossing problem was solved (restriction built and isolated).
     pub cells_solved: u64,
     /// Solved cells that held the crossing the ray took.
@@ -86,6 +89,7 @@ impl Counters {
         self.rays += o.rays;
         self.rays_entering += o.rays_entering;
         self.cells_visited += o.cells_visited;
+        self.subcell_skips += o.subcell_skips;
         self.cells_solved += o.cells_solved;
         self.cells_with_crossing += o.cells_with_crossing;
         self.kernel_evals += o.kernel_evals;

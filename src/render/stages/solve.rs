@@ -13,7 +13,6 @@ use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
 use super::field_minus_iso;
 use crate::filter::patch::{patch_lanes, restrict_patch_lanes, weight_matrix};
-use crate::render::stages::traverse::{CellRay, cell_span};
 use crate::render::stats::Counters;
 use crate::roots::bernstein::{Interval, IsolationWork, MAX_DEGREE, lane_stays};
 use crate::roots::{brent, inside};
@@ -64,7 +63,6 @@ fn solve_cells<const S: usize, const L: usize, M: Madd>(
     let weights = weight_matrix(ctx.field);
     let mut patch = vec![[0.0f64; L]; S * S * S];
     let mut tmp = vec![[0.0f64; L]; S * S * S];
-    let off = ctx.lattice.offset;
     for group in input.chunks(L) {
         let mut tau = [[0.0; L]; 3];
         let mut delta = [[0.0; L]; 3];
@@ -78,10 +76,9 @@ fn solve_cells<const S: usize, const L: usize, M: Madd>(
             let og = ctx.to_grid(rays.origin(i));
             let dg = ctx.to_grid(rays.direction(i));
             let cell = rays.cell_of(i);
-            let ray = CellRay::new([og.x + off, og.y + off, og.z + off], [dg.x, dg.y, dg.z]);
-            let (c0, c1) = cell_span(&ray, cell);
-            let t0 = c0.max(rays.t_start[i]);
-            let t1 = c1.min(rays.t_end[i]).max(t0);
+            // The traversal's segment: the part of the cell from its first to
+            // its last tagged sub-cell on this ray.
+            let (t0, t1) = (rays.t[i], rays.seg_end[i]);
             let (p0, p1) = (og + t0 * dg, og + t1 * dg);
             let (base, ta, de) = ctx.field.lane_segment(cell, p0.to_array(), p1.to_array());
             bases[l] = base;

@@ -10,7 +10,9 @@
 use super::super::context::{Ctx, Skip};
 use super::super::packet::{Fate, Queue, Rays};
 use super::field_minus_iso;
+use crate::classify::bezier::SUB;
 use crate::filter::kernel::floor_i64;
+use crate::octree::TAGGED;
 use crate::render::stats::Counters;
 use crate::roots::inside;
 use crate::scene::Traversal;
@@ -29,12 +31,31 @@ pub fn traverse<const S: usize>(
                 march::<S>(ctx, rays, r, solve, record, c);
             }
         }
-        Traversal::Dda | Traversal::Octree | Traversal::Distance => {
-            for &r in input {
-                walk(ctx, rays, r, solve, record, c);
+        Traversal::Dda | Traversal::Octree | Traversal::Distance => match &ctx.skip {
+            Skip::Octree { tree, leaf_level } => {
+                for &r in input {
+                    walk_octree(ctx, tree, *leaf_level, rays, r, solve, record, c);
+                }
             }
-        }
+            _ => {
+                for &r in input {
+                    walk(ctx, rays, r, solve, record, c);
+                }
+            }
+        },
     }
+}
+
+/// `max`/`min` without NaN handling: ray parameters here are never NaN, and
+/// the library versions cost a compare-and-blend more on every step.
+#[inline(always)]
+fn fmax(a: f64, b: f64) -> f64 {
+    if a > b { a } else { b }
+}
+
+#[inline(always)]
+fn fmin(a: f64, b: f64) -> f64 {
+    if a < b { a } else { b }
 }
 
 /// A ray in cell coordinates: origin, direction and its reciprocal.
@@ -66,11 +87,103 @@ pub fn cell_span(ray: &CellRay, cell: [i64; 3]) -> (f64, f64) {
         if ray.du[a] != 0.0 {
             let ta = (cell[a] as f64 - ray.ou[a]) * ray.inv[a];
             let tb = ((cell[a] + 1) as f64 - ray.ou[a]) * ray.inv[a];
-            t0 = t0.max(ta.min(tb));
-            t1 = t1.min(ta.max(tb));
+            t0 = fmax(t0, fmin(ta, tb));
+            t1 = fmin(t1, fmax(ta, tb));
         }
     }
     (t0, t1)
+}
+
+/// `AXIS_SPAN[a][lo][hi]`: the sub-cell bits whose index along axis `a` lies
+/// in `lo..=hi` (see [`crate::classify::bezier::SubCells`] for the layout).
+const AXIS_SPAN: [[[u64; SUB]; SUB]; 3] = {
+    let mut t = [[[0u64; SUB]; SUB]; 3];
+    let mut a = 0;
+    while a < 3 {
+        let mut lo = 0;
+        while lo < SUB {
+            let mut hi = lo;
+            while hi < SUB {
+                let mut bits = 0u64;
+                let mut b = 0;
+                while b < SUB * SUB * SUB {
+                    let along = [b % SUB, b / SUB % SUB, b / (SUB * SUB)][a];
+                    if along >= lo && along <= hi {
+                        bits |= 1 << b;
+                    }
+                    b += 1;
+                }
+                t[a][lo][hi] = bits;
+                hi += 1;
+            }
+            lo += 1;
+        }
+        a += 1;
+    }
+    t
+};
+
+/// Whether the segment `[t0, t1]` of the ray in `cell` meets a tagged
+/// sub-cell of `mask` (4³ bits); when it meets none, it provably holds no
+/// crossing.
+///
+/// First a box test (the sub-cells spanned by the segment's bounding box,
+/// one lookup per axis, widened by 1e-9 against rounding) rejects most
+/// segments; survivors walk the sub-cells they cross (Amanatides–Woo at
+/// quarter-cell resolution) until a tagged one turns up. A pure function of
+/// the ray, the cell and `[t0, t1]`, like [`cell_span`].
+#[inline]
+pub fn meets_tagged_sub_cell(ray: &CellRay, cell: [i64; 3], t0: f64, t1: f64, mask: u64) -> bool {
+    if mask == 0 {
+        return false;
+    }
+    let n = SUB as f64;
+    let local = |a: usize, t: f64| n * (ray.ou[a] + t * ray.du[a] - cell[a] as f64);
+    let index = |v: f64| (floor_i64(v).clamp(0, SUB as i64 - 1)) as usize;
+    let mut bbox = u64::MAX;
+    for a in 0..3 {
+        let (v0, v1) = (local(a, t0), local(a, t1));
+        let (lo, hi) = if v0 <= v1 { (v0, v1) } else { (v1, v0) };
+        bbox &= AXIS_SPAN[a][index(lo - 1e-9)][index(hi + 1e-9)];
+    }
+    if mask & bbox == 0 {
+        return false;
+    }
+    let mut idx = [0usize; 3];
+    let mut t_max = [f64::INFINITY; 3];
+    let mut t_delta = [0.0f64; 3];
+    for a in 0..3 {
+        let k = index(local(a, t0));
+        idx[a] = k;
+        if ray.du[a] > 0.0 {
+            t_max[a] = (cell[a] as f64 + (k + 1) as f64 / n - ray.ou[a]) * ray.inv[a];
+            t_delta[a] = ray.inv[a] / n;
+        } else if ray.du[a] < 0.0 {
+            t_max[a] = (cell[a] as f64 + k as f64 / n - ray.ou[a]) * ray.inv[a];
+            t_delta[a] = -ray.inv[a] / n;
+        }
+    }
+    loop {
+        if mask >> (idx[0] + SUB * (idx[1] + SUB * idx[2])) & 1 == 1 {
+            return true;
+        }
+        let a = if t_max[0] <= t_max[1] {
+            if t_max[0] <= t_max[2] { 0 } else { 2 }
+        } else if t_max[1] <= t_max[2] {
+            1
+        } else {
+            2
+        };
+        if t_max[a] >= t1 {
+            return false;
+        }
+        let next = idx[a] as i64 + if ray.du[a] > 0.0 { 1 } else { -1 };
+        if !(0..SUB as i64).contains(&next) {
+            return false;
+        }
+        idx[a] = next as usize;
+        t_max[a] += t_delta[a];
+    }
 }
 
 /// Where the ray leaves the aligned block of `2^level` cells holding `cell`
@@ -98,35 +211,38 @@ pub fn exit_box(
     t: f64,
 ) -> (f64, [i64; 3]) {
     let CellRay { ou, du, inv } = *ray;
-    let mut t_exit = f64::INFINITY;
-    let mut axis = 0;
-    for a in 0..3 {
-        let ta = if du[a] > 0.0 {
+    // The direction's signs are the same for every step of a ray, so these
+    // branches predict well; the choice of the exit axis, which changes from
+    // step to step, is made by selects.
+    let te: [f64; 3] = std::array::from_fn(|a| {
+        if du[a] > 0.0 {
             ((hi[a] + 1) as f64 - ou[a]) * inv[a]
         } else if du[a] < 0.0 {
             (lo[a] as f64 - ou[a]) * inv[a]
         } else {
             f64::INFINITY
+        }
+    });
+    let (t01, a01) = if te[0] <= te[1] {
+        (te[0], 0)
+    } else {
+        (te[1], 1)
+    };
+    let (t_exit, axis) = if t01 <= te[2] { (t01, a01) } else { (te[2], 2) };
+    let t_new = fmax(t_exit, t);
+    let next = std::array::from_fn(|a| {
+        let (past, inside) = if du[a] > 0.0 {
+            // Inside [cell, hi]: clamped into the box, never backwards.
+            let at = floor_i64(ou[a] + t_new * du[a]);
+            (hi[a] + 1, at.min(hi[a]).max(cell[a]))
+        } else if du[a] < 0.0 {
+            let at = floor_i64(ou[a] + t_new * du[a]);
+            (lo[a] - 1, at.max(lo[a]).min(cell[a]))
+        } else {
+            (cell[a], cell[a])
         };
-        if ta < t_exit {
-            t_exit = ta;
-            axis = a;
-        }
-    }
-    let t_new = t_exit.max(t);
-    let mut next = cell;
-    for a in 0..3 {
-        if a == axis {
-            next[a] = if du[a] > 0.0 { hi[a] + 1 } else { lo[a] - 1 };
-        } else if du[a] != 0.0 {
-            let at = floor_i64(ou[a] + t_new * du[a]).clamp(lo[a], hi[a]);
-            next[a] = if du[a] > 0.0 {
-                at.max(cell[a])
-            } else {
-                at.min(cell[a])
-            };
-        }
-    }
+        if a == axis { past } else { inside }
+    });
     (t_new, next)
 }
 
@@ -170,7 +286,7 @@ impl Dda {
         for a in 0..3 {
             if self.step[a] != 0 {
                 let edge = (cell[a] + (self.step[a] > 0) as i64) as f64;
-                self.t_max[a] = ((edge - ray.ou[a]) * ray.inv[a]).max(t);
+                self.t_max[a] = fmax((edge - ray.ou[a]) * ray.inv[a], t);
             }
         }
     }
@@ -178,7 +294,7 @@ impl Dda {
     /// Where the ray leaves the current cell.
     #[inline(always)]
     pub fn cell_exit(&self) -> f64 {
-        self.t_max[0].min(self.t_max[1]).min(self.t_max[2])
+        fmin(fmin(self.t_max[0], self.t_max[1]), self.t_max[2])
     }
 
     /// Steps into the next cell along the ray.
@@ -214,10 +330,11 @@ fn walk(
     c: &mut Counters,
 ) {
     let i = r as usize;
-    let og = ctx.to_grid(rays.origin(i));
-    let dg = ctx.to_grid(rays.direction(i));
-    let off = ctx.lattice.offset;
-    let ray = CellRay::new([og.x + off, og.y + off, og.z + off], [dg.x, dg.y, dg.z]);
+    let ray = CellRay {
+        ou: std::array::from_fn(|a| rays.cell_org[a][i]),
+        du: std::array::from_fn(|a| rays.cell_dir[a][i]),
+        inv: std::array::from_fn(|a| rays.cell_inv[a][i]),
+    };
     let mut w = Dda::new(&ray, rays.cell_of(i), rays.t[i]);
     let t_end = rays.t_end[i];
     if rays.advance[i] {
@@ -234,7 +351,11 @@ fn walk(
         let cell = w.cell;
         let skip = match &ctx.skip {
             Skip::Bound(b) => (!b.may_cross(ctx.field, cell, ctx.iso)).then_some(0),
-            Skip::Octree { tree, leaf_level } => tree.skip_level_fast(cell, *leaf_level),
+            Skip::Octree { tree, leaf_level } => match tree.skip_byte(cell) {
+                TAGGED => None,
+                l if (l as u32) < *leaf_level => Some(0),
+                l => Some(l as u32),
+            },
             Skip::Distance(p) => match p.get(cell) {
                 0 => None,
                 1 => Some(0),
@@ -251,13 +372,19 @@ fn walk(
             },
         };
         match skip {
-            None => {
-                rays.t[i] = w.t;
-                rays.seg_end[i] = w.cell_exit().min(t_end);
-                rays.set_cell(i, cell);
-                solve.push(r);
-                return;
-            }
+            None => match tagged_segment(ctx, &ray, cell, rays.t_start[i], t_end) {
+                Some((ta, tb)) => {
+                    rays.t[i] = ta;
+                    rays.seg_end[i] = tb;
+                    rays.set_cell(i, cell);
+                    solve.push(r);
+                    return;
+                }
+                None => {
+                    c.subcell_skips += 1;
+                    w.advance();
+                }
+            },
             Some(0) => w.advance(),
             Some(level) => {
                 let (t, next) = exit_block(&ray, cell, level, w.t);
@@ -265,6 +392,92 @@ fn walk(
             }
         }
     }
+}
+
+/// The segment of the ray's piece inside tagged `cell` to solve (from the
+/// ray and the cell alone, so it is the same bits however the walk got
+/// here), or `None` when it meets none of the cell's tagged sub-cells.
+#[inline(always)]
+fn tagged_segment(
+    ctx: &Ctx,
+    ray: &CellRay,
+    cell: [i64; 3],
+    t_start: f64,
+    t_end: f64,
+) -> Option<(f64, f64)> {
+    let (c0, c1) = cell_span(ray, cell);
+    let t0 = fmax(c0, t_start);
+    let t1 = fmax(fmin(c1, t_end), t0);
+    match ctx.patches.and_then(|p| Some((p, p.slot(cell)?))) {
+        // The mask only decides whether to solve: the solve itself gets the
+        // whole segment, so its polynomial (and every root, tangential touch
+        // and tolerance decision) is the same bits with or without masks.
+        Some((p, slot)) => {
+            meets_tagged_sub_cell(ray, cell, t0, t1, p.mask(slot)).then_some((t0, t1))
+        }
+        None => Some((t0, t1)),
+    }
+}
+
+/// The cell walk over octree tags. Every step is one byte load and one box
+/// exit — a single cell, or the largest empty block holding it (levels
+/// below the leaf level count as single cells) — so the only branch that
+/// depends on the data is "tagged or not".
+#[allow(clippy::too_many_arguments)]
+fn walk_octree(
+    ctx: &Ctx,
+    tree: &crate::octree::Octree,
+    leaf_level: u32,
+    rays: &mut Rays,
+    r: u32,
+    solve: &mut Queue,
+    record: &mut Queue,
+    c: &mut Counters,
+) {
+    let i = r as usize;
+    let ray = CellRay {
+        ou: std::array::from_fn(|a| rays.cell_org[a][i]),
+        du: std::array::from_fn(|a| rays.cell_dir[a][i]),
+        inv: std::array::from_fn(|a| rays.cell_inv[a][i]),
+    };
+    let (t_start, t_end) = (rays.t_start[i], rays.t_end[i]);
+    let mut cell = rays.cell_of(i);
+    let mut t = rays.t[i];
+    if rays.advance[i] {
+        rays.advance[i] = false;
+        (t, cell) = exit_box(&ray, cell, cell, cell, t);
+    }
+    let mut visited = 0u64;
+    loop {
+        if t >= t_end || !in_range(ctx, cell) {
+            rays.fate[i] = Fate::Escaped;
+            record.push(r);
+            break;
+        }
+        visited += 1;
+        let byte = tree.skip_byte(cell);
+        let level = if byte == TAGGED {
+            match tagged_segment(ctx, &ray, cell, t_start, t_end) {
+                Some((ta, tb)) => {
+                    rays.t[i] = ta;
+                    rays.seg_end[i] = tb;
+                    rays.set_cell(i, cell);
+                    solve.push(r);
+                    break;
+                }
+                None => {
+                    c.subcell_skips += 1;
+                    0
+                }
+            }
+        } else if (byte as u32) < leaf_level {
+            0
+        } else {
+            byte as u32
+        };
+        (t, cell) = exit_block(&ray, cell, level, t);
+    }
+    c.cells_visited += visited;
 }
 
 /// Fixed-step march for `step`: samples at `t0 + k·h` until the side changes.
@@ -377,5 +590,80 @@ mod tests {
         );
         assert_eq!(t, 3.5);
         assert_eq!(next, [4, 1, 0]);
+    }
+}
+
+#[cfg(test)]
+mod sub_cell_tests {
+    use super::*;
+    use crate::classify::bezier::{SubCells, bernstein_weights, cell_bernstein};
+    use crate::filter::{Field, FilterKind};
+    use crate::lattice::Lattice;
+    use crate::roots::bernstein::{BernsteinBasis, IsolationWork};
+    use crate::volume::{SampleType, Volume};
+
+    #[test]
+    fn a_segment_with_a_crossing_meets_a_tagged_sub_cell() {
+        let dims = [10usize, 9, 11];
+        let s: Vec<f32> = (0..dims.iter().product::<usize>())
+            .map(|i| ((i * 7919 + 5) % 251) as f32)
+            .collect();
+        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let mut rng = 12345u64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 11) as f64 / (1u64 << 53) as f64
+        };
+        for name in ["catmull-rom", "bspline3", "linear", "bspline2"] {
+            let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
+            let lat = Lattice::new(f.kernel(), dims);
+            let iso = f.separating_iso(125.0);
+            let beta = bernstein_weights(&f);
+            let mut sub = SubCells::new(f.kernel().support());
+            let basis = BernsteinBasis::new(3 * (f.kernel().support() - 1));
+            let (mut checked, mut crossings) = (0, 0);
+            for _ in 0..20000 {
+                let cell = [
+                    1 + (next() * 6.0) as i64,
+                    1 + (next() * 5.0) as i64,
+                    1 + (next() * 7.0) as i64,
+                ];
+                let mask = sub.mask(
+                    &cell_bernstein(&f, cell, iso, &beta),
+                    1e-12 * f.max_abs_coeff().max(1.0),
+                );
+                // A random line through the cell.
+                let p: [f64; 3] = std::array::from_fn(|a| cell[a] as f64 + next());
+                let d: [f64; 3] = std::array::from_fn(|_| next() * 2.0 - 1.0);
+                let ou: [f64; 3] = std::array::from_fn(|a| p[a] - 3.0 * d[a]);
+                let ray = CellRay::new(ou, d);
+                let (t0, t1) = cell_span(&ray, cell);
+                if t1 <= t0 {
+                    continue;
+                }
+                checked += 1;
+                let off = lat.offset;
+                let p0 = std::array::from_fn(|a| ou[a] + t0 * d[a] - off);
+                let p1 = std::array::from_fn(|a| ou[a] + t1 * d[a] - off);
+                let mut mono = [0.0; 22];
+                crate::with_support!(f.kernel().support(), S => f.restrict::<S>(cell, p0, p1, iso, &mut mono));
+                let poly = basis.segment(&mono[..=basis.degree()]);
+                let start_in = crate::roots::inside(poly.eval(0.0));
+                let mut w = IsolationWork::default();
+                if let Some(s) = poly.first_crossing(start_in, 1e-12, &mut w) {
+                    crossings += 1;
+                    assert!(
+                        meets_tagged_sub_cell(&ray, cell, t0, t1, mask),
+                        "{name} {cell:?}: crossing at s = {s} but no tagged sub-cell met (mask {mask:#x})"
+                    );
+                }
+            }
+            assert!(
+                checked > 1000 && crossings > 50,
+                "{name}: {checked} {crossings}"
+            );
+        }
     }
 }
