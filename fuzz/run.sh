@@ -73,8 +73,9 @@ for t in "${targets[@]}"; do
   else
     result="CRASH (exit $status)"
     failed+=("$t")
-    echo "-- $t failed; the end of $log:"
-    tail -n 60 "$log"
+    echo "-- $t failed; the panic and the end of $log:"
+    grep -m 3 -A 2 "panicked at" "$log" || true
+    tail -n 40 "$log"
   fi
   echo "$t: ${execs:-?} executions (${rate:-?}/s), corpus $corpus files, $result"
   rows+=("| $t | $secs | ${execs:-?} | ${rate:-?} | $corpus | $result |")
