@@ -2,6 +2,7 @@
 //! one-line error naming the file and problem, exit code 2, no panic and no
 //! output file.
 
+use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
@@ -53,7 +54,7 @@ fn assert_fails(o: &Output, needles: &[&str]) {
     let e = stderr(o);
     assert_eq!(o.status.code(), Some(2), "exit code; stderr: {e}");
     assert!(!e.contains("panicked"), "panic: {e}");
-    let errs: Vec<&str> = e.lines().filter(|l| l.starts_with("error")).collect();
+    let errs: Vec<&str> = e.lines().filter(|l| l.starts_with("error:")).collect();
     assert_eq!(errs.len(), 1, "one error line: {e}");
     for n in needles {
         assert!(errs[0].contains(n), "'{n}' not in: {}", errs[0]);
@@ -239,47 +240,317 @@ fn iso_outside_the_data_is_a_warning_and_a_backdrop_image() {
     assert!(png.exists());
 }
 
-#[test]
-fn bad_volume_inputs() {
-    let t = Tmp::new("badvol");
-    let nrrd = |body: &str, data: &[u8]| {
-        let mut v = body.as_bytes().to_vec();
-        v.extend_from_slice(data);
-        v
-    };
-    let cases: Vec<(PathBuf, Vec<&str>, Vec<&str>)> = vec![
-        (t.write("trunc.nrrd", &nrrd("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 4 4 4\nencoding: raw\n\n", &[0; 10])), vec![], vec!["trunc.nrrd"]),
-        (t.write("sizes.nrrd", &nrrd("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", &[0; 9])), vec![], vec!["sizes.nrrd", "match"]),
-        (t.write("type.nrrd", &nrrd("NRRD0004\ntype: quaternion\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n", &[0; 8])), vec![], vec!["type.nrrd", "quaternion"]),
-        (t.write("enc.nrrd", &nrrd("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: bzip2\n\n", &[0; 8])), vec![], vec!["enc.nrrd", "bzip2"]),
-        (t.write("zero.nrrd", &nrrd("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 0 2\nencoding: raw\n\n", &[])), vec![], vec!["zero.nrrd"]),
-        (t.write("huge.nrrd", &nrrd("NRRD0004\ntype: float\ndimension: 3\nsizes: 100000 100000 100000\nencoding: raw\nendian: little\n\n", &[0; 16])), vec![], vec!["huge.nrrd"]),
-        (t.write("garbage.nrrd", b"\x00\x01hello"), vec![], vec!["garbage.nrrd"]),
-        (t.write("x.vol", b"abc"), vec![], vec!["x.vol", "unknown volume format"]),
-        (t.path("missing.nrrd"), vec![], vec!["missing.nrrd"]),
-        (t.write("r.raw", &[0; 10]), vec!["--dims", "2,2,2", "--type", "u16"], vec!["r.raw"]),
-        (t.write("r0.raw", &[0; 10]), vec!["--dims", "0,2,2", "--type", "u8"], vec!["r0.raw"]),
-        (t.write("rov.raw", &[0; 10]), vec!["--dims", "18446744073709551615,2,2", "--type", "u8"], vec!["rov.raw", "overflow"]),
-        (t.write("rt.raw", &[0; 8]), vec!["--dims", "2,2,2", "--type", "u128"], vec!["--type", "u128"]),
-        (t.write("rd.raw", &[0; 8]), vec!["--dims", "2,2"], vec!["--dims"]),
-        (t.write("big.raw", &[0; 8]), vec!["--dims", "2,2,2", "--type", "u8", "--memory-limit", "16"], vec!["big.raw", "limit"]),
+/// One bad input for `snell`: what it is, the arguments (run in the test's
+/// scratch directory, so its files are named bare), words the error line must
+/// contain, and an environment variable to set besides the table's
+/// `SNELL_MEMORY_LIMIT`.
+struct Bad {
+    kind: &'static str,
+    what: &'static str,
+    args: Vec<String>,
+    needles: Vec<&'static str>,
+    env: Option<(&'static str, &'static str)>,
+}
+
+/// `cmd` is split at spaces; `{sphere}`, `{lobster}` and `{tooth}` stand for
+/// the paths of scenes/sphere.toml, scenes/lobster.toml and the tooth CT.
+fn bad(kind: &'static str, what: &'static str, cmd: &str, needles: &[&'static str]) -> Bad {
+    let path = |p: PathBuf| p.to_str().unwrap().to_string();
+    let vars = [
+        ("{sphere}", path(root().join(SPHERE))),
+        ("{lobster}", path(root().join("scenes/lobster.toml"))),
+        ("{tooth}", path(data("tooth.nrrd"))),
     ];
-    for (path, extra, needles) in cases {
-        let mut args = vec!["info", path.to_str().unwrap()];
-        args.extend(extra.iter());
-        assert_fails(&run(&args), &needles);
+    Bad {
+        kind,
+        what,
+        args: cmd
+            .split(' ')
+            .map(|a| vars.iter().fold(a.to_string(), |a, (k, v)| a.replace(k, v)))
+            .collect(),
+        needles: needles.to_vec(),
+        env: None,
     }
-    // NaN in float data: rejected with counts, accepted with --allow-nan.
+}
+
+/// The memory limit every bad-input run gets unless the case sets its own, so
+/// the messages that quote it read the same on every machine.
+const TABLE_MEMORY_LIMIT: &str = "4G";
+
+fn nrrd(fields: &str, data: &[u8]) -> Vec<u8> {
+    let mut v = format!("NRRD0004\n{fields}\n").into_bytes();
+    v.extend_from_slice(data);
+    v
+}
+
+/// A NIfTI-1 header for a 2x2x2 volume of `datatype`, with `sizeof_hdr`, and
+/// `extra` bytes of data after it.
+fn nifti(sizeof_hdr: i32, datatype: i16, bitpix: i16, extra: usize) -> Vec<u8> {
+    let mut h = vec![0u8; 352];
+    h[0..4].copy_from_slice(&sizeof_hdr.to_le_bytes());
+    for (i, d) in [3i16, 2, 2, 2, 1, 1, 1, 1].iter().enumerate() {
+        h[40 + 2 * i..42 + 2 * i].copy_from_slice(&d.to_le_bytes());
+    }
+    h[70..72].copy_from_slice(&datatype.to_le_bytes());
+    h[72..74].copy_from_slice(&bitpix.to_le_bytes());
+    for i in 0..8 {
+        h[76 + 4 * i..80 + 4 * i].copy_from_slice(&1.0f32.to_le_bytes());
+    }
+    h[108..112].copy_from_slice(&352.0f32.to_le_bytes());
+    h[344..348].copy_from_slice(b"n+1\0");
+    h.resize(352 + extra, 0);
+    h
+}
+
+/// Every file, in the scratch directory (recursively), with its contents.
+fn listing(dir: &Path) -> Vec<(PathBuf, Vec<u8>)> {
+    let mut out = Vec::new();
+    for e in std::fs::read_dir(dir).unwrap() {
+        let p = e.unwrap().path();
+        if p.is_dir() {
+            out.push((p.clone(), Vec::new()));
+            out.extend(listing(&p));
+        } else {
+            out.push((p.clone(), std::fs::read(&p).unwrap()));
+        }
+    }
+    out.sort();
+    out
+}
+
+/// Every bad input the command line is known to meet, across volume files,
+/// scenes and flags: each must exit 2 with exactly one `error:` line that
+/// names the problem, never panic, and leave no file behind (output or
+/// temporary). The table of messages goes to `$SNELL_TABLE_DIR/bad-inputs.md`
+/// when that variable is set (docs/robustness.md holds a copy).
+#[test]
+fn bad_inputs_fail_cleanly_without_output() {
+    let t = Tmp::new("bad");
+    let u8_3 = "type: uint8\ndimension: 3";
+
+    t.write(
+        "trunc.nrrd",
+        &nrrd(&format!("{u8_3}\nsizes: 4 4 4\nencoding: raw\n"), &[0; 10]),
+    );
+    t.write(
+        "sizes.nrrd",
+        &nrrd(&format!("{u8_3}\nsizes: 2 2 2\nencoding: raw\n"), &[0; 9]),
+    );
+    t.write(
+        "type.nrrd",
+        &nrrd(
+            "type: quaternion\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n",
+            &[0; 8],
+        ),
+    );
+    t.write(
+        "enc.nrrd",
+        &nrrd(&format!("{u8_3}\nsizes: 2 2 2\nencoding: bzip2\n"), &[0; 8]),
+    );
+    t.write(
+        "zero.nrrd",
+        &nrrd(&format!("{u8_3}\nsizes: 2 0 2\nencoding: raw\n"), &[]),
+    );
+    t.write("huge.nrrd", &nrrd("type: float\ndimension: 3\nsizes: 100000 100000 100000\nencoding: raw\nendian: little\n", &[0; 16]));
+    t.write(
+        "gz.nrrd",
+        &nrrd(
+            &format!("{u8_3}\nsizes: 2 2 2\nencoding: gzip\n"),
+            b"not gzip data",
+        ),
+    );
+    t.write(
+        "d4.nrrd",
+        &nrrd(
+            "type: uint8\ndimension: 4\nsizes: 2 2 2 2\nencoding: raw\n",
+            &[0; 16],
+        ),
+    );
+    t.write(
+        "det.nhdr",
+        &nrrd(
+            &format!("{u8_3}\nsizes: 2 2 2\nencoding: raw\ndata file: nothere.raw"),
+            &[],
+        ),
+    );
+    let mut nan = nrrd(
+        "type: float\ndimension: 3\nsizes: 2 1 1\nencoding: raw\nendian: little\n",
+        &[],
+    );
+    nan.extend_from_slice(&1.0f32.to_le_bytes());
+    nan.extend_from_slice(&f32::NAN.to_le_bytes());
+    t.write("nan.nrrd", &nan);
+    t.write("garbage.nrrd", b"\x00\x01hello");
+    t.write("empty.nrrd", b"");
+    t.write("short.nii", &[0; 100]);
+    t.write("sizeof.nii", &nifti(999, 2, 8, 8));
+    t.write("cplx.nii", &nifti(348, 32, 64, 64));
+    t.write("x.vol", b"abc");
+    t.write("r.raw", &[0; 10]);
+    t.write("good.txt", b"1,2,3\n");
+    t.write("fields.txt", b"1,2,3\n4,5\n");
+    t.write("nanpts.txt", b"1,2,3\n\n1,nan,3\n");
+    t.write("notexr.exr", b"hi");
+    scene_file(&t, "nokey.toml", |s| s.replace("iso = 127.5\n", ""));
+    scene_file(&t, "filter.toml", |s| s.replace("bspline3", "gaussian"));
+    scene_file(&t, "samepos.toml", |s| {
+        s.replace(
+            "look_at = [31.5, 31.5, 31.5]",
+            "look_at = [31.5, 31.5, -150.0]",
+        )
+    });
+    scene_file(&t, "ior.toml", |s| s.replace("ior = 1.5", "ior = 0.0"));
+    scene_file(&t, "section.toml", |s| {
+        s.replace("[volume.phantom]", "[volume.phantomx]")
+    });
+    scene_file(&t, "novolume.toml", |s| {
+        s.replace(
+            "[volume.phantom]\nkind = \"sphere\"\nsize = 64\nradius = 20.0\nsigma = 3.0\nformat = \"u8\"",
+            "[volume]\npath = \"nope.nrrd\"",
+        )
+    });
+    scene_file(&t, "syntax.toml", |s| s.replace("[image]", "[image"));
+    scene_file(&t, "size.toml", |s| s.replace("width = 512", "width = 0"));
+
+    // One line per case: kind, what, command, words the message must hold.
+    #[rustfmt::skip]
+    let cases = vec![
+        bad("file", "NRRD: raw data shorter than the sizes", "info trunc.nrrd", &["trunc.nrrd"]),
+        bad("file", "NRRD: data longer than the sizes", "info sizes.nrrd", &["sizes.nrrd", "match"]),
+        bad("file", "NRRD: unknown type", "info type.nrrd", &["type.nrrd", "quaternion"]),
+        bad("file", "NRRD: unsupported encoding", "info enc.nrrd", &["enc.nrrd", "bzip2"]),
+        bad("file", "NRRD: an axis of size 0", "info zero.nrrd", &["zero.nrrd"]),
+        bad("file", "NRRD: sizes over the memory limit", "info huge.nrrd", &["huge.nrrd", "limit"]),
+        bad("file", "NRRD: gzip encoding, data not gzip", "info gz.nrrd", &["gz.nrrd", "gzip"]),
+        bad("file", "NRRD: 4-D data", "info d4.nrrd", &["d4.nrrd", "4-D"]),
+        bad("file", "NHDR: data file missing", "info det.nhdr", &["det.nhdr", "nothere.raw"]),
+        bad("file", "NRRD: NaN in float data", "info nan.nrrd", &["nan.nrrd", "NaN", "--allow-nan"]),
+        bad("file", "not a NRRD (binary junk)", "info garbage.nrrd", &["garbage.nrrd"]),
+        bad("file", "empty file", "info empty.nrrd", &["empty.nrrd"]),
+        bad("file", "NIfTI: shorter than its header", "info short.nii", &["short.nii", "348"]),
+        bad("file", "NIfTI: wrong sizeof_hdr", "info sizeof.nii", &["sizeof.nii", "sizeof_hdr"]),
+        bad("file", "NIfTI: complex datatype", "info cplx.nii", &["cplx.nii", "complex64"]),
+        bad("file", "unknown extension", "info x.vol", &["x.vol", "unknown volume format"]),
+        bad("file", "volume file missing", "info missing.nrrd", &["missing.nrrd"]),
+        bad("file", "raw: file shorter than --dims", "info r.raw --dims 2,2,2 --type u16", &["r.raw"]),
+        bad("file", "raw: --offset past the end", "info r.raw --dims 2,2,2 --type u8 --offset 100", &["r.raw", "100-byte offset"]),
+        bad("file", "raw: a zero dimension", "info r.raw --dims 0,2,2 --type u8", &["r.raw"]),
+        bad("file", "raw: dims whose product overflows", "info r.raw --dims 18446744073709551615,2,2 --type u8", &["r.raw", "overflow"]),
+        bad("file", "raw: over --memory-limit", "info r.raw --dims 2,2,2 --type u8 --memory-limit 16", &["r.raw", "limit"]),
+        Bad {
+            env: Some(("SNELL_MEMORY_LIMIT", "64")),
+            ..bad("file", "raw: over SNELL_MEMORY_LIMIT=64", "info r.raw --dims 2,2,2 --type u8", &["r.raw", "limit"])
+        },
+        bad("flag", "--type unknown", "info r.raw --dims 2,2,2 --type u128", &["--type", "u128"]),
+        bad("flag", "--dims with two values", "info r.raw --dims 2,2 --type u8", &["--dims"]),
+        bad("flag", "--dims without --type", "info r.raw --dims 2,2,2", &["--type"]),
+        bad("flag", "--endian neither little nor big", "info r.raw --dims 2,2,2 --type u8 --endian middle", &["--endian", "middle"]),
+        bad("flag", "--memory-limit not a size", "info r.raw --dims 2,2,2 --type u8 --memory-limit lots", &["--memory-limit", "lots"]),
+        bad("flag", "--spacing with a zero", "info r.raw --dims 2,2,2 --type u8 --spacing 0,1,1", &["r.raw", "spacing"]),
+        bad("flag", "--threads 0", "render {sphere} -o out.png --threads 0", &["--threads"]),
+        bad("flag", "--threads not a number", "render {sphere} -o out.png --threads two", &["--threads", "two"]),
+        bad("flag", "--set without =", "render {sphere} -o out.png --set nonsense", &["--set nonsense"]),
+        bad("flag", "-o into a missing directory", "render {sphere} -o /nonexistent-dir/x.png", &["/nonexistent-dir"]),
+        bad("flag", "-o is a directory", "render {sphere} -o .", &["is a directory"]),
+        bad("flag", "--hits into a missing directory", "render {sphere} -o out.png --hits /nonexistent-dir/h.exr", &["/nonexistent-dir"]),
+        bad("flag", "sample --filter unknown", "sample {tooth} --filter gauss --points good.txt", &["gauss"]),
+        bad("flag", "sample --lambda negative", "sample {tooth} --filter smooth-bspline3 --lambda -1 --points good.txt", &["lambda"]),
+        bad("file", "sample points: a row of two numbers", "sample {tooth} --filter bspline3 --points fields.txt", &["fields.txt", "line 2"]),
+        bad("file", "sample points: NaN", "sample {tooth} --filter bspline3 --points nanpts.txt", &["nanpts.txt", "line 3"]),
+        bad("file", "sample points file missing", "sample {tooth} --filter linear --points nopoints.txt", &["nopoints.txt"]),
+        bad("flag", "phantom --size 0", "phantom sphere --size 0 -o p.nrrd", &["size"]),
+        bad("flag", "phantom --format unknown", "phantom sphere --format u3 -o p.nrrd", &["--format", "u3"]),
+        bad("flag", "phantom --hole with two numbers", "phantom sphere --hole 1,2 -o p.nrrd", &["--hole"]),
+        bad("flag", "unknown subcommand", "frobnicate", &["frobnicate"]),
+        bad("file", "compare: not an EXR", "compare notexr.exr notexr.exr", &["notexr.exr"]),
+        bad("file", "compare: EXR missing", "compare nothere.exr notexr.exr", &["nothere.exr"]),
+        bad("scene", "required key missing", "render nokey.toml -o out.png", &["nokey.toml", "iso"]),
+        bad("scene", "unknown filter", "render filter.toml -o out.png", &["filter.toml", "surface.filter", "gaussian"]),
+        bad("scene", "camera look_at at its own position", "render samepos.toml -o out.png", &["samepos.toml", "camera"]),
+        bad("scene", "ior 0", "render ior.toml -o out.png", &["ior.toml", "surface.ior"]),
+        bad("scene", "unknown section", "render section.toml -o out.png", &["section.toml", "phantomx"]),
+        bad("scene", "the scene's volume file missing", "render novolume.toml -o out.png", &["nope.nrrd"]),
+        bad("scene", "TOML syntax error", "render syntax.toml -o out.png", &["syntax.toml"]),
+        bad("scene", "image width 0", "render size.toml -o out.png", &["size.toml", "image"]),
+        bad("scene", "scene file missing", "render absent.toml -o out.png", &["absent.toml"]),
+        bad("scene", "--set unknown filter", "render {sphere} -o out.png --set surface.filter=bspline9", &["surface.filter"]),
+        bad("scene", "--set camera up along the view", "render {sphere} -o out.png --set camera.up=[0,0,1]", &["camera"]),
+        bad("scene", "--set unknown key", "render {sphere} -o out.png --set image.foo=3", &["image.foo"]),
+        bad("scene", "--set negative width", "render {sphere} -o out.png --set image.width=-5", &["image.width"]),
+        bad("scene", "--set render.tile=0", "render {sphere} -o out.png --set render.tile=0", &["render.tile"]),
+        bad("scene", "--set unknown traversal", "render {sphere} -o out.png --set render.traversal=teleport", &["render.traversal", "teleport"]),
+        bad("scene", "--set iso NaN", "render {sphere} -o out.png --set surface.iso=nan", &["surface.iso", "NaN"]),
+        bad("scene", "--set fov_y 180", "render {sphere} -o out.png --set camera.fov_y=180", &["camera.fov_y"]),
+        bad("scene", "--set a checker and an image backdrop", "render {sphere} -o out.png --set backdrop.image=\"photo.jpg\"", &["backdrop"]),
+        bad("scene", "phantom over the memory limit", "render {sphere} -o out.png --set volume.phantom.size=100000", &["phantom", "limit"]),
+        Bad {
+            env: Some(("SNELL_MEMORY_LIMIT", "1M")),
+            ..bad("scene", "image over SNELL_MEMORY_LIMIT=1M", "render {sphere} -o out.png --hits h.exr", &["[image]", "limit of 1.0 MiB"])
+        },
+        bad("scene", "reference of a scene without a sphere phantom", "reference {lobster} --hits h.exr -o ref.png", &["sphere phantom"]),
+    ];
+
+    let before = listing(&t.0);
+    let shorten = |s: &str| {
+        s.replace(&format!("{}/", root().display()), "")
+            .replace(&format!("{}/", t.0.display()), "")
+    };
+    let mut table = format!(
+        "Every command runs in a scratch directory holding the inputs, with `SNELL_MEMORY_LIMIT={TABLE_MEMORY_LIMIT}` unless the case sets its own; paths are shown relative to the repository.\n\n\
+         | # | kind | bad input | command | message (the one `error:` line) | exit |\n|---|---|---|---|---|---|\n"
+    );
+    let mut seen = std::collections::HashSet::new();
+    for (i, c) in cases.iter().enumerate() {
+        assert!(seen.insert(c.what), "duplicate case '{}'", c.what);
+        let (k, v) = c.env.unwrap_or(("SNELL_MEMORY_LIMIT", TABLE_MEMORY_LIMIT));
+        let o = bin()
+            .args(&c.args)
+            .current_dir(&t.0)
+            .env("SNELL_MEMORY_LIMIT", TABLE_MEMORY_LIMIT)
+            .env(k, v)
+            .output()
+            .unwrap();
+        let e = stderr(&o);
+        assert_fails(&o, &c.needles);
+        assert!(
+            listing(&t.0) == before,
+            "'{}' left a file behind or changed one: {e}",
+            c.what
+        );
+        let line = e.lines().find(|l| l.starts_with("error:")).unwrap();
+        let cmd = match c.env {
+            Some((k, v)) => format!("{k}={v} snell {}", c.args.join(" ")),
+            None => format!("snell {}", c.args.join(" ")),
+        };
+        writeln!(
+            table,
+            "| {} | {} | {} | `{}` | {} | {} |",
+            i + 1,
+            c.kind,
+            c.what,
+            shorten(&cmd),
+            shorten(line).replace('|', "\\|"),
+            o.status.code().unwrap()
+        )
+        .unwrap();
+    }
+    assert!(cases.len() >= 30);
+    eprint!("{table}");
+    if let Some(dir) = std::env::var_os("SNELL_TABLE_DIR") {
+        std::fs::create_dir_all(&dir).unwrap();
+        std::fs::write(Path::new(&dir).join("bad-inputs.md"), &table).unwrap();
+    }
+}
+
+#[test]
+fn nan_samples_load_with_allow_nan() {
+    let t = Tmp::new("allownan");
     let mut body =
         b"NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 1\nencoding: raw\nendian: little\n\n"
             .to_vec();
     body.extend_from_slice(&1.0f32.to_le_bytes());
     body.extend_from_slice(&f32::NAN.to_le_bytes());
     let p = t.write("nan.nrrd", &body);
-    assert_fails(
-        &run(&["info", p.to_str().unwrap()]),
-        &["nan.nrrd", "NaN", "--allow-nan"],
-    );
     let o = run(&["info", p.to_str().unwrap(), "--allow-nan"]);
     assert!(
         o.status.success() && stderr(&o).contains("warning"),
@@ -288,182 +559,79 @@ fn bad_volume_inputs() {
     );
 }
 
+/// The render's memory need (frame buffers and tile scratch) is checked
+/// against the limit before anything is allocated: over it, exit 2 and no
+/// output; the same limit lets a smaller image through.
 #[test]
-fn bad_sample_inputs() {
-    let t = Tmp::new("badsample");
-    let vol = data("tooth.nrrd");
-    let v = vol.to_str().unwrap();
-    let good = t.write("good.txt", b"1,2,3\n");
-    let bad = t.write("bad.txt", b"1,2,3\n4,5\n");
-    let nan = t.write("nan.txt", b"1,2,3\n\n1,nan,3\n");
+fn image_over_the_memory_limit_is_refused() {
+    let t = Tmp::new("memlimit");
+    let (png, hits) = (t.path("big.png"), t.path("big.exr"));
+    let render = |png: &Path, hits: &Path, size: &str| {
+        bin()
+            .env("SNELL_MEMORY_LIMIT", "8M")
+            .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
+            .arg(png)
+            .arg("--hits")
+            .arg(hits)
+            .args(["--set", &format!("image.width={size}")])
+            .args(["--set", &format!("image.height={size}")])
+            .output()
+            .unwrap()
+    };
+    // 1024² pixels at 96 bytes of frame each: 96 MiB, over 8 MiB.
     assert_fails(
-        &run(&[
-            "sample",
-            v,
-            "--filter",
-            "bspline3",
-            "--points",
-            bad.to_str().unwrap(),
-        ]),
-        &["bad.txt", "line 2"],
+        &render(&png, &hits, "1024"),
+        &["[image]", "1024x1024", "8.0 MiB"],
     );
-    assert_fails(
-        &run(&[
-            "sample",
-            v,
-            "--filter",
-            "bspline3",
-            "--points",
-            nan.to_str().unwrap(),
-        ]),
-        &["nan.txt", "line 3"],
-    );
-    assert_fails(
-        &run(&[
-            "sample",
-            v,
-            "--filter",
-            "gauss",
-            "--points",
-            good.to_str().unwrap(),
-        ]),
-        &["gauss"],
-    );
-    assert_fails(
-        &run(&[
-            "sample",
-            v,
-            "--filter",
-            "smooth-bspline3",
-            "--lambda",
-            "-1",
-            "--points",
-            good.to_str().unwrap(),
-        ]),
-        &["lambda"],
-    );
-    assert_fails(
-        &run(&[
-            "sample",
-            v,
-            "--filter",
-            "linear",
-            "--points",
-            "/nonexistent/p.txt",
-        ]),
-        &["p.txt"],
-    );
+    assert!(!png.exists() && !hits.exists());
+    assert_eq!(t.0.read_dir().unwrap().count(), 0, "nothing left behind");
+    // 32² pixels (96 KiB) and the 64³ u8 phantom (4.3 MiB) fit.
+    let (png, hits) = (t.path("small.png"), t.path("small.exr"));
+    let o = render(&png, &hits, "32");
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(png.exists() && hits.exists());
 }
 
+/// Separate processes with 1 and 2 worker threads, and with another tile
+/// size, write byte-identical hit-position EXRs (and PNGs).
 #[test]
-fn bad_scenes_fail_cleanly_without_output() {
-    let t = Tmp::new("badscene");
-    let out = t.path("never.png");
-    let cases: Vec<(PathBuf, Vec<&str>, Vec<&str>)> = vec![
-        (
-            scene_file(&t, "nokey.toml", |s| s.replace("iso = 127.5\n", "")),
-            vec![],
-            vec!["nokey.toml", "iso"],
-        ),
-        (
-            scene_file(&t, "filter.toml", |s| s.replace("bspline3", "gaussian")),
-            vec![],
-            vec!["filter.toml", "surface.filter", "gaussian"],
-        ),
-        (
-            scene_file(&t, "cam.toml", |s| {
-                s.replace(
-                    "look_at = [31.5, 31.5, 31.5]",
-                    "look_at = [31.5, 31.5, -150.0]",
-                )
-            }),
-            vec![],
-            vec!["cam.toml", "camera"],
-        ),
-        (
-            scene_file(&t, "ior.toml", |s| s.replace("ior = 1.5", "ior = 0.0")),
-            vec![],
-            vec!["ior.toml", "surface.ior"],
-        ),
-        (
-            scene_file(&t, "novol.toml", |s| {
-                s.replace(
-                    "[volume.phantom]\nkind = \"sphere\"",
-                    "[volume]\npath = \"nope.nrrd\"\n[volume.phantomx]\nkind = \"sphere\"",
-                )
-            }),
-            vec![],
-            vec!["novol.toml"],
-        ),
-        (
-            scene_file(&t, "missing.toml", |s| {
-                s.replace("[volume.phantom]\nkind = \"sphere\"\nsize = 64\nradius = 20.0\nsigma = 3.0\nformat = \"u8\"", "[volume]\npath = \"nope.nrrd\"")
-            }),
-            vec![],
-            vec!["nope.nrrd"],
-        ),
-        (
-            scene_file(&t, "syntax.toml", |s| s.replace("[image]", "[image")),
-            vec![],
-            vec!["syntax.toml"],
-        ),
-        (
-            scene_file(&t, "size.toml", |s| s.replace("width = 512", "width = 0")),
-            vec![],
-            vec!["size.toml", "image"],
-        ),
-        (
-            root().join(SPHERE),
-            vec!["--set", "surface.filter=bspline9"],
-            vec!["surface.filter"],
-        ),
-        (
-            root().join(SPHERE),
-            vec![
-                "--set",
-                "camera.up=[0.0, 0.0, 1.0]",
-                "--set",
-                "camera.position=[31.5, 31.5, -150]",
-            ],
-            vec!["camera"],
-        ),
-        (
-            root().join(SPHERE),
-            vec!["--set", "nonsense"],
-            vec!["--set nonsense"],
-        ),
-        (
-            root().join(SPHERE),
-            vec!["--threads", "0"],
-            vec!["--threads"],
-        ),
-        (t.path("absent.toml"), vec![], vec!["absent.toml"]),
+fn hits_are_bitwise_identical_across_threads_and_tiles() {
+    let t = Tmp::new("determinism");
+    let runs: [(&str, &[&str]); 3] = [
+        ("t1", &["--threads", "1"]),
+        ("t2", &["--threads", "2"]),
+        ("t2-tile7", &["--threads", "2", "--set", "render.tile=7"]),
     ];
-    for (scene, extra, needles) in cases {
-        let mut args = vec![
-            "render",
-            scene.to_str().unwrap(),
-            "-o",
-            out.to_str().unwrap(),
-        ];
-        args.extend(extra.iter());
-        assert_fails(&run(&args), &needles);
-        assert!(!out.exists(), "no output for {}", scene.display());
+    let mut outputs = Vec::new();
+    for (name, extra) in runs {
+        let (png, hits) = (
+            t.path(&format!("{name}.png")),
+            t.path(&format!("{name}.exr")),
+        );
+        let o = bin()
+            .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
+            .arg(&png)
+            .arg("--hits")
+            .arg(&hits)
+            .args(["--set", "image.width=90", "--set", "image.height=70"])
+            .args(extra)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        outputs.push((
+            name,
+            std::fs::read(&hits).unwrap(),
+            std::fs::read(&png).unwrap(),
+        ));
     }
-    // An output directory that does not exist: refused before rendering.
-    let o = run(&[
-        "render",
-        root().join(SPHERE).to_str().unwrap(),
-        "-o",
-        "/nonexistent-dir/x.png",
-    ]);
-    assert_fails(&o, &["/nonexistent-dir"]);
-    assert!(
-        Path::new(&t.0).read_dir().unwrap().all(|e| {
-            let n = e.unwrap().file_name();
-            let n = n.to_string_lossy();
-            n.ends_with(".toml") && !n.starts_with('.')
-        }),
-        "no temporary files left"
-    );
+    // The image is not trivial: many rays refract through the sphere.
+    let h = snell::film::HitImage::read_exr(&t.path("t1.exr")).unwrap();
+    assert_eq!((h.width, h.height), (90, 70));
+    let refracted = h.events.iter().filter(|&&e| e >= 2.0).count();
+    assert!(refracted > 500, "{refracted} refracted pixels");
+    let (_, hits1, png1) = &outputs[0];
+    for (name, hits, png) in &outputs[1..] {
+        assert!(hits == hits1, "{name}: hit EXR differs from --threads 1");
+        assert!(png == png1, "{name}: PNG differs from --threads 1");
+    }
 }

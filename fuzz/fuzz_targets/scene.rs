@@ -46,7 +46,11 @@ fuzz_target!(|data: &[u8]| {
     let prep = Prepared::new(std::sync::Arc::new(vol), scene.surface.filter);
     let frame = snell::render::render(&scene, &prep, None);
     assert!(
-        frame.film.color.iter().all(|c| c.iter().all(|v| v.is_finite())),
+        frame
+            .film
+            .color
+            .iter()
+            .all(|c| c.iter().all(|v| v.is_finite())),
         "non-finite pixel"
     );
     assert_eq!(frame.stats.counters.undefined, 0, "rays ended undefined");

@@ -12,13 +12,17 @@ use snell::volume::{LoadOptions, Volume, VolumeError};
 /// enough that a hostile header is refused long before libFuzzer's RSS limit.
 pub const MEMORY_LIMIT: u64 = 16 << 20;
 
-/// A directory private to this process (on tmpfs when there is one).
+/// A directory private to this process, under `$SNELL_FUZZ_SCRATCH` or
+/// else on tmpfs when there is one.
 pub fn scratch() -> &'static Path {
     static DIR: OnceLock<PathBuf> = OnceLock::new();
     DIR.get_or_init(|| {
-        let base = Path::new("/dev/shm");
-        let base = if base.is_dir() {
-            base.to_path_buf()
+        // fuzz/run.sh names a directory it removes afterwards.
+        let shm = Path::new("/dev/shm");
+        let base = if let Some(d) = std::env::var_os("SNELL_FUZZ_SCRATCH") {
+            PathBuf::from(d)
+        } else if shm.is_dir() {
+            shm.to_path_buf()
         } else {
             std::env::temp_dir()
         };
