@@ -50,7 +50,13 @@ fn render(scene: &Scene, vol: Option<Volume>) -> Frame {
         Some(v) => v,
         None => scene.load_volume(&Default::default()).unwrap(),
     };
-    let prep = Prepared::new(Arc::new(vol), scene.surface.filter);
+    // The scene's own acceleration (octree and tags when it asks for them),
+    // so the suite stresses the path users render with.
+    let mut prep = Prepared::new(Arc::new(vol), scene.surface.filter);
+    if let Some(method) = snell::prepare::needs_accel(scene) {
+        prep = prep.with_accel(scene.surface.iso, method);
+        prep.ready_for(scene.render.traversal);
+    }
     let f = render::render(scene, &prep, None);
     let c = &f.stats.counters;
     assert_eq!(c.undefined, 0, "rays ended in an undefined state");
@@ -489,7 +495,7 @@ fn cases() -> Vec<Case> {
             "trapped rays stop at exactly max_events; time per ray bounded",
             || {
                 let s = sphere(
-                    24,
+                    12,
                     &[
                         "surface.ior=4.0",
                         "render.max_events=2000",
