@@ -213,7 +213,8 @@ pub enum Supersampling {
     Jitter,
     /// Post-refraction supersampling from the hit-position image (the paper).
     Prss,
-    /// The pixel's backdrop footprint from hit-position differences, box-filtered.
+    /// The pixel's backdrop footprint from hit-position differences, box or
+    /// EWA filtered (`footprint`).
     Footprint,
 }
 
