@@ -635,3 +635,88 @@ fn hits_are_bitwise_identical_across_threads_and_tiles() {
         assert!(png == png1, "{name}: PNG differs from --threads 1");
     }
 }
+
+/// A `w×h` grey PNG whose value at `(x, y)` is `f(x, y)`.
+fn grey_png(t: &Tmp, name: &str, w: u32, h: u32, f: impl Fn(u32, u32) -> u8) -> PathBuf {
+    let p = t.path(name);
+    image::RgbImage::from_fn(w, h, |x, y| image::Rgb([f(x, y); 3]))
+        .save(&p)
+        .unwrap();
+    p
+}
+
+#[test]
+fn compare_images_reports_metrics_and_writes_a_diff() {
+    let t = Tmp::new("cmpimg");
+    let checker = |x: u32, y: u32| {
+        if (x / 4 + y / 4).is_multiple_of(2) {
+            200
+        } else {
+            40
+        }
+    };
+    let a = grey_png(&t, "a.png", 32, 24, checker);
+    // Every value 20/255 brighter: RMSE 20/255, PSNR 20·log10(255/20).
+    let b = grey_png(&t, "b.png", 32, 24, |x, y| checker(x, y) + 20);
+    let diff = t.path("diff.png");
+    let s = |p: &Path| p.to_str().unwrap().to_string();
+    let o = run(&["compare", &s(&a), &s(&b), "--json", "--diff", &s(&diff)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let num = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("{k} in {j}"));
+    let d = 20.0 / 255.0;
+    assert!((num("rmse") - d).abs() < 1e-6, "{j}");
+    assert!((num("max_abs") - d).abs() < 1e-6, "{j}");
+    assert!(
+        (num("psnr") - 20.0 * (255.0f64 / 20.0).log10()).abs() < 1e-4,
+        "{j}"
+    );
+    // Same structure, shifted mean: SSIM just below 1.
+    assert!(num("ssim") > 0.9 && num("ssim") < 1.0, "{j}");
+    // The heat map: same size, every pixel |diff| = 20/255 → (3·2d, 0, 0).
+    let heat = image::open(&diff).unwrap().to_rgb8();
+    assert_eq!(heat.dimensions(), (32, 24));
+    let red = (3.0 * 2.0 * d * 255.0f64).round() as u8;
+    assert!(
+        heat.pixels().all(|p| p.0 == [red, 0, 0]),
+        "{:?}",
+        heat.get_pixel(0, 0)
+    );
+
+    // Text output; an image against itself is perfect.
+    let o = run(&["compare", &s(&a), &s(&a)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(
+        text.contains("RMSE 0.00000")
+            && text.contains("PSNR inf dB")
+            && text.contains("SSIM 1.0000"),
+        "{text}"
+    );
+    // A local difference shows where it is in the heat map, nowhere else.
+    let c = grey_png(&t, "c.png", 32, 24, |x, y| {
+        if (10..14).contains(&x) && (5..9).contains(&y) {
+            255 - checker(x, y)
+        } else {
+            checker(x, y)
+        }
+    });
+    let diff2 = t.path("diff2.png");
+    let o = run(&["compare", &s(&c), &s(&a), "--diff", &s(&diff2)]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let heat = image::open(&diff2).unwrap().to_rgb8();
+    for (x, y, p) in heat.enumerate_pixels() {
+        let inside = (10..14).contains(&x) && (5..9).contains(&y);
+        assert_eq!(p.0 == [255, 255, 255], inside, "({x}, {y}): {:?}", p.0);
+        if !inside {
+            assert_eq!(p.0, [0, 0, 0]);
+        }
+    }
+
+    // Different sizes: one error line, exit 2, no diff written.
+    let small = grey_png(&t, "small.png", 16, 24, checker);
+    let diff3 = t.path("diff3.png");
+    let o = run(&["compare", &s(&small), &s(&a), "--diff", &s(&diff3)]);
+    assert_fails(&o, &["small.png", "differ in size"]);
+    assert!(!diff3.exists());
+}

@@ -47,7 +47,7 @@ pub const QUALITY_REFERENCE_SAMPLES: u32 = 16;
 
 /// Render settings that only change how a frame is computed, not what it
 /// should converge to; ground truth drops them.
-const RENDER_ONLY_KEYS: [&str; 13] = [
+const RENDER_ONLY_KEYS: [&str; 15] = [
     "traversal",
     "step",
     "tolerance",
@@ -56,9 +56,11 @@ const RENDER_ONLY_KEYS: [&str; 13] = [
     "leaf",
     "supersampling",
     "samples",
-    "prss_ring",
+    "prss_samples",
+    "prss_map",
     "prss_fallback",
     "prss_curvature",
+    "footprint",
     "seed",
     "threads",
 ];

@@ -11,8 +11,8 @@ use snell::bench::{self, DEFAULT_REPEATS, Observer, Options, Suite, peer};
 #[derive(ClapArgs, Debug)]
 pub struct Args {
     /// Suite: quick (under 3 minutes on 2 cores), paper (the paper's Tables 1-4
-    /// with error columns, about 1.5 hours) or full (paper plus filters, octree
-    /// leaf sizes, PRSS variants, about 2 hours).
+    /// with error columns and anti-aliasing quality, about 1.75 hours) or full
+    /// (paper plus filters, octree leaf sizes, PRSS variants, about 2.25 hours).
     /// (default: quick, or none when --peer is given).
     #[arg(long)]
     pub suite: Option<String>,

@@ -7,6 +7,8 @@
 //!
 //! Every file is written atomically (see [`crate::atomic`]).
 
+pub mod footprint;
+pub(crate) mod hitmap;
 pub mod metrics;
 pub mod prss;
 

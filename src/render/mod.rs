@@ -135,13 +135,7 @@ fn render_with(
     };
     if let Some(mode) = post_mode {
         let post_start = Instant::now();
-        let settings = prss::PostSettings {
-            mode,
-            samples: n,
-            ring: rs.prss_ring,
-            fallback: rs.prss_fallback,
-            curvature: rs.prss_curvature,
-        };
+        let settings = prss::PostSettings::new(mode, rs);
         let post = prss::shade(&film, &scene.backdrop, scene.background, &settings);
         film.color = post.color;
         stats.post = Some(post.stats);

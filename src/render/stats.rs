@@ -230,10 +230,11 @@ impl RenderStats {
         ));
         if let Some(p) = &self.post {
             s.push_str(&format!(
-                "anti-aliasing: {} quadrants interpolated, {} mirrored, {} nearest; {} pixels re-traced ({} for curvature)\n",
+                "anti-aliasing: {} quadrants interpolated, {} mirrored, {} nearest; {} pixels blended across a boundary; {} pixels re-traced ({} for curvature)\n",
                 p.quadrants_interpolated,
                 p.quadrants_mirrored,
                 p.quadrants_nearest,
+                p.pixels_blended,
                 p.pixels_flagged,
                 p.pixels_curved
             ));

@@ -213,7 +213,8 @@ pub enum Supersampling {
     Jitter,
     /// Post-refraction supersampling from the hit-position image (the paper).
     Prss,
-    /// The pixel's backdrop footprint from hit-position differences, box-filtered.
+    /// The pixel's backdrop footprint from hit-position differences, box or
+    /// EWA filtered (`footprint`).
     Footprint,
 }
 
@@ -222,13 +223,54 @@ pub enum Supersampling {
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
 #[serde(rename_all = "lowercase")]
 pub enum PrssFallback {
-    /// Extrapolate from the opposite neighbour, else use the centre hit.
-    #[default]
+    /// Extrapolate the missing neighbours linearly from the centre's own
+    /// (consistent) neighbours; the whole pixel keeps the centre's surface.
     Mirror,
-    /// Use the centre hit for that quadrant.
+    /// Extrapolate like `mirror`, and blend in the neighbours' own surfaces
+    /// (or the background where they miss the backdrop) over the part of the
+    /// pixel nearer to them, weighted by the bilinear hat of each pixel
+    /// centre: the expected coverage when the boundary lies anywhere between
+    /// the two centres.
+    #[default]
+    Blend,
+    /// Blend like `blend`, but re-trace with real sub-pixel rays the pixels
+    /// whose neighbourhood no straight boundary explains (pieces a pixel or
+    /// two wide: chains of internal reflections at a rim), and the boundary
+    /// pixels next to them.
+    #[serde(rename = "blend-trace")]
+    BlendTrace,
+    /// Use the centre hit for the missing neighbours.
     Nearest,
     /// Trace real sub-pixel rays for the pixel (adaptive supersampling).
     Trace,
+}
+
+/// How PRSS interpolates the hit map between a pixel and its neighbours.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum PrssMap {
+    /// Straight lines from the centre to each of the 8 neighbours, bilinear in
+    /// each quadrant (the paper's intermediate points).
+    Bilinear,
+    /// The biquadratic through the 3×3 neighbourhood: smooth across the
+    /// quadrants, exact for maps that bend quadratically.
+    Biquadratic,
+    /// Catmull-Rom through the 5×5 neighbourhood (the paper's larger ring).
+    #[default]
+    Bicubic,
+}
+
+/// The filter footprint anti-aliasing integrates the backdrop with.
+#[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "lowercase")]
+pub enum FootprintFilter {
+    /// The pixel square mapped through the Jacobian (a parallelogram), box
+    /// filtered: exact coverage for checkers.
+    #[default]
+    Box,
+    /// An elliptical Gaussian (Heckbert's EWA): the pixel's Gaussian mapped
+    /// through the Jacobian.
+    Ewa,
 }
 
 #[derive(Deserialize, Debug)]
@@ -255,11 +297,17 @@ struct RenderCfg {
     supersampling: Supersampling,
     #[serde(default = "default_samples")]
     samples: u32,
-    /// PRSS neighbourhood: 1 (3×3, bilinear) or 2 (5×5, bicubic).
-    #[serde(default = "default_ring")]
-    prss_ring: u32,
+    /// PRSS sub-points per pixel side (and footprint samples of photographs).
+    #[serde(default = "default_prss_samples")]
+    prss_samples: u32,
+    /// How PRSS interpolates the hit map between neighbours.
+    #[serde(default)]
+    prss_map: PrssMap,
     #[serde(default)]
     prss_fallback: PrssFallback,
+    /// The filter of `supersampling = "footprint"`.
+    #[serde(default)]
+    footprint: FootprintFilter,
     /// With `prss_fallback = "trace"`: re-trace pixels whose hit map bends by
     /// more than this many checker squares (or texels) between neighbours.
     #[serde(default = "default_curvature")]
@@ -283,11 +331,11 @@ fn default_tile() -> u32 {
 fn default_samples() -> u32 {
     4
 }
+fn default_prss_samples() -> u32 {
+    8
+}
 fn default_leaf() -> u32 {
     4
-}
-fn default_ring() -> u32 {
-    1
 }
 fn default_curvature() -> f64 {
     0.25
@@ -305,8 +353,10 @@ impl Default for RenderCfg {
             leaf: default_leaf(),
             supersampling: Supersampling::default(),
             samples: default_samples(),
-            prss_ring: default_ring(),
+            prss_samples: default_prss_samples(),
+            prss_map: PrssMap::default(),
             prss_fallback: PrssFallback::default(),
+            footprint: FootprintFilter::default(),
             prss_curvature: default_curvature(),
             seed: 0,
         }
@@ -354,10 +404,15 @@ pub struct RenderSettings {
     /// Octree leaf side in cells.
     pub leaf: u32,
     pub supersampling: Supersampling,
-    /// `N` for `N×N` rays per pixel (grid, jitter) or sub-points (PRSS).
+    /// `N` for `N×N` rays per pixel (grid, jitter, and pixels the PRSS and
+    /// footprint fallbacks re-trace).
     pub samples: u32,
-    pub prss_ring: u32,
+    /// `N` for `N×N` PRSS sub-points per pixel (footprint: samples over a
+    /// photograph's box footprint).
+    pub prss_samples: u32,
+    pub prss_map: PrssMap,
     pub prss_fallback: PrssFallback,
+    pub footprint: FootprintFilter,
     pub prss_curvature: f64,
     pub seed: u64,
 }
@@ -459,7 +514,10 @@ impl Scene {
         match self.render.supersampling {
             Supersampling::Grid | Supersampling::Jitter => n * n + 1,
             Supersampling::Prss | Supersampling::Footprint
-                if self.render.prss_fallback == PrssFallback::Trace =>
+                if matches!(
+                    self.render.prss_fallback,
+                    PrssFallback::Trace | PrssFallback::BlendTrace
+                ) =>
             {
                 n * n
             }
@@ -805,6 +863,12 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             format!("must be in 1..=64, got {}", r.samples),
         ));
     }
+    if r.prss_samples == 0 || r.prss_samples > 64 {
+        return Err(bad(
+            "render.prss_samples",
+            format!("must be in 1..=64, got {}", r.prss_samples),
+        ));
+    }
     let classify = match r.classify.as_deref() {
         // Precomputed tags are cheap (tens of ms, cached) and make the cell
         // walk an order of magnitude faster than bounding every visited cell
@@ -841,12 +905,6 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             format!("must be > 0 (checker squares), got {}", r.prss_curvature),
         ));
     }
-    if !(1..=2).contains(&r.prss_ring) {
-        return Err(bad(
-            "render.prss_ring",
-            format!("must be 1 or 2, got {}", r.prss_ring),
-        ));
-    }
     if !r.leaf.is_power_of_two() || r.leaf > 64 {
         return Err(bad(
             "render.leaf",
@@ -863,8 +921,10 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         leaf: r.leaf,
         supersampling: r.supersampling,
         samples: r.samples,
-        prss_ring: r.prss_ring,
+        prss_samples: r.prss_samples,
+        prss_map: r.prss_map,
         prss_fallback: r.prss_fallback,
+        footprint: r.footprint,
         prss_curvature: r.prss_curvature,
         seed: r.seed,
     };
