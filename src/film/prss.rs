@@ -593,11 +593,45 @@ fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
                 e[1][i] = mid(e[0][i], e[1][i], e[2][i]);
             }
         }
-        PrssMap::Bicubic => return false,
+        PrssMap::Bicubic => return bicubic_in_one_square(g, size),
     }
     let square = |h: [f64; 2]| (floor_i64(h[0] / size), floor_i64(h[1] / size));
     let first = square(e[1][1]);
     e.iter().flatten().all(|&h| square(h) == first)
+}
+
+/// [`in_one_square`] for the bicubic map. On each quadrant of the pixel the
+/// map is `Σ wx_i wy_j g_ji` over a 4×4 block of the grid (offsets -s, 0, s,
+/// 2s), with Catmull-Rom weights at `|t| ≤ 1/2`: they sum to 1 and their
+/// negative part is at most `a(1-a)/2 ≤ 1/8` per axis, so the tensor weights'
+/// negative mass is at most `2·(1/8)·(9/8) = 9/32`. Each coordinate then stays
+/// within the block's range widened by 9/32 of it on both sides. Every block
+/// holds the centre, so blocks inside one square share it.
+fn bicubic_in_one_square(g: &Grid, size: f64) -> bool {
+    const NEG: f64 = 9.0 / 32.0;
+    let inv = 1.0 / size;
+    for sy in [-1i64, 1] {
+        for sx in [-1i64, 1] {
+            let at = |s: i64| [-s, 0, s, 2 * s].map(|o| (o + 2) as usize);
+            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+            for j in at(sy) {
+                for i in at(sx) {
+                    for k in 0..2 {
+                        lo[k] = lo[k].min(g[j][i][k]);
+                        hi[k] = hi[k].max(g[j][i][k]);
+                    }
+                }
+            }
+            for k in 0..2 {
+                // Widened a little more for the rounding of the sums.
+                let m = NEG * (hi[k] - lo[k]) + 1e-9 * (lo[k].abs() + hi[k].abs() + size);
+                if floor_i64((lo[k] - m) * inv) != floor_i64((hi[k] + m) * inv) {
+                    return false;
+                }
+            }
+        }
+    }
+    true
 }
 
 /// The larger side of the bounding box of the map at the pixel's centre,
@@ -910,7 +944,7 @@ mod tests {
                     ];
                 }
             }
-            for map in [PrssMap::Bilinear, PrssMap::Biquadratic] {
+            for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
                 if !in_one_square(&g, map, 1.0) {
                     continue;
                 }
