@@ -7,7 +7,10 @@
 //! - `eval/FILTER/...`: value + gradient at 4096 pseudo-random points of a 64³
 //!   sphere, through the per-point API (`value_grad_in`, what the refract
 //!   stage calls), as a dependent chain (latency: each point waits for the
-//!   previous result), and through the SoA batch API.
+//!   previous result), and through the SoA batch API (SIMD lanes); the
+//!   random points miss the cache on most rows, so `batch along rays`
+//!   repeats the batch on points as a ray caster asks for them (64 rays of
+//!   64 samples 0.1 voxel apart).
 //!
 //! ```sh
 //! CARGO_TARGET_DIR=/work/target-filter cargo bench --bench filter
@@ -136,6 +139,24 @@ fn eval(c: &mut Criterion) {
         pts.iter().map(|p| p[1]).collect(),
         pts.iter().map(|p| p[2]).collect(),
     );
+    // The same number of points as a ray caster asks for them: 64 rays
+    // through the sphere, 64 samples each, 0.1 voxel apart.
+    let ray_pts: Vec<[f64; 3]> = (0..pts.len())
+        .map(|k| {
+            let (ray, step) = (k / 64, (k % 64) as f64 * 0.1);
+            let a = ray as f64 * 0.37;
+            [
+                20.0 + 0.3 * (ray % 8) as f64 + step * a.cos(),
+                20.0 + 0.3 * (ray / 8) as f64 + step * a.sin(),
+                20.0 + step * 0.5,
+            ]
+        })
+        .collect();
+    let (rx, ry, rz): (Vec<f64>, Vec<f64>, Vec<f64>) = (
+        ray_pts.iter().map(|p| p[0]).collect(),
+        ray_pts.iter().map(|p| p[1]).collect(),
+        ray_pts.iter().map(|p| p[2]).collect(),
+    );
     let mut out = [
         vec![0.0; pts.len()],
         vec![0.0; pts.len()],
@@ -172,6 +193,13 @@ fn eval(c: &mut Criterion) {
             b.iter(|| {
                 let [v, gx, gy, gz] = &mut out;
                 f.value_grad_batch([&xs, &ys, &zs], [v, gx, gy, gz]);
+                black_box(v[0] + gx[1] + gy[2] + gz[3])
+            })
+        });
+        g.bench_function(format!("{name}/value+grad batch along rays"), |b| {
+            b.iter(|| {
+                let [v, gx, gy, gz] = &mut out;
+                f.value_grad_batch([&rx, &ry, &rz], [v, gx, gy, gz]);
                 black_box(v[0] + gx[1] + gy[2] + gz[3])
             })
         });

@@ -147,6 +147,62 @@ macro_rules! with_isa {
     }};
 }
 
+/// Value and gradient of a cubic (support 4) tensor spline from its 4³
+/// coefficient neighbourhood, with AVX2 + FMA: each x-row of 4 coefficients
+/// is one vector; rows are combined over y (weights and derivative weights),
+/// then over z into three accumulators (value/x-derivative, y-derivative,
+/// z-derivative), and four dot products of 4 finish it. Row `(j, k)` of the neighbourhood is
+/// `nb[j·sy + k·sz ..][..4]`; `w`/`d` are the weights and derivative
+/// weights per axis.
+///
+/// # Safety
+/// The CPU must have AVX2 and FMA ([`Isa::Avx2`] or better), and `nb` must
+/// hold `3·(sy + sz) + 4` values.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2,fma")]
+#[inline]
+pub unsafe fn cubic_value_grad(
+    nb: &[f64],
+    sy: usize,
+    sz: usize,
+    w: &[[f64; 4]; 3],
+    d: &[[f64; 4]; 3],
+) -> (f64, [f64; 3]) {
+    use std::arch::x86_64::*;
+    // Per z-plane k: P_k = Σ_j wy_j c_jk and Q_k = Σ_j dy_j c_jk (vectors
+    // along x); then R = Σ_k wz_k P_k, Ry = Σ_k wz_k Q_k, Rz = Σ_k dz_k P_k.
+    let wy = w[1].map(|v| _mm256_set1_pd(v));
+    let dy = d[1].map(|v| _mm256_set1_pd(v));
+    let (mut rv, mut ry, mut rz) = (
+        _mm256_setzero_pd(),
+        _mm256_setzero_pd(),
+        _mm256_setzero_pd(),
+    );
+    for k in 0..4 {
+        let (mut pk, mut qk) = (_mm256_setzero_pd(), _mm256_setzero_pd());
+        for j in 0..4 {
+            // SAFETY: the caller guarantees the row is inside `nb`.
+            let c = unsafe { _mm256_loadu_pd(nb.as_ptr().add(j * sy + k * sz)) };
+            pk = _mm256_fmadd_pd(wy[j], c, pk);
+            qk = _mm256_fmadd_pd(dy[j], c, qk);
+        }
+        let (wz, dz) = (_mm256_set1_pd(w[2][k]), _mm256_set1_pd(d[2][k]));
+        rv = _mm256_fmadd_pd(wz, pk, rv);
+        ry = _mm256_fmadd_pd(wz, qk, ry);
+        rz = _mm256_fmadd_pd(dz, pk, rz);
+    }
+    let dot = |a: __m256d, b: &[f64; 4]| {
+        // SAFETY: `b` holds 4 f64.
+        let p = _mm256_mul_pd(a, unsafe { _mm256_loadu_pd(b.as_ptr()) });
+        let s = _mm_add_pd(_mm256_castpd256_pd128(p), _mm256_extractf128_pd(p, 1));
+        _mm_cvtsd_f64(_mm_add_sd(s, _mm_unpackhi_pd(s, s)))
+    };
+    (
+        dot(rv, &w[0]),
+        [dot(rv, &d[0]), dot(ry, &w[0]), dot(rz, &w[0])],
+    )
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -37,6 +37,9 @@ pub trait Coefficient:
     const NAME: &'static str;
     fn to_f64(self) -> f64;
     fn from_f64(v: f64) -> Self;
+    /// The slice itself when the storage is already `f64` (vector kernels
+    /// load it directly), else `None`.
+    fn as_f64_slice(s: &[Self]) -> Option<&[f64]>;
 }
 
 impl Coefficient for f64 {
@@ -49,6 +52,10 @@ impl Coefficient for f64 {
     fn from_f64(v: f64) -> Self {
         v
     }
+    #[inline(always)]
+    fn as_f64_slice(s: &[Self]) -> Option<&[f64]> {
+        Some(s)
+    }
 }
 
 impl Coefficient for f32 {
@@ -60,6 +67,10 @@ impl Coefficient for f32 {
     #[inline(always)]
     fn from_f64(v: f64) -> Self {
         v as f32
+    }
+    #[inline(always)]
+    fn as_f64_slice(_: &[Self]) -> Option<&[f64]> {
+        None
     }
 }
 
