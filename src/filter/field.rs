@@ -195,12 +195,13 @@ impl<T: Coefficient> Field<T> {
         let isa = crate::simd::Isa::current();
         let [ov, ox, oy, oz] = out;
         #[cfg(target_arch = "x86_64")]
-        if self.kernel.support() == 4 && isa != crate::simd::Isa::Portable {
-            if let Some(data) = T::as_f64_slice(self.coeffs.data()) {
-                // SAFETY: the instruction set was checked above.
-                unsafe { self.cubic_batch(data, p, [ov, ox, oy, oz]) };
-                return;
-            }
+        if self.kernel.support() == 4
+            && isa != crate::simd::Isa::Portable
+            && let Some(data) = T::as_f64_slice(self.coeffs.data())
+        {
+            // SAFETY: the instruction set was checked above.
+            unsafe { self.cubic_batch(data, p, [ov, ox, oy, oz]) };
+            return;
         }
         crate::with_isa!(isa, L, M => with_support!(self.kernel.support(), S => {
             let mut start = 0;
