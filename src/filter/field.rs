@@ -231,6 +231,22 @@ impl<T: Coefficient> Field<T> {
         }));
     }
 
+    /// [`Field::value_grad_in`], through the AVX2/FMA cubic kernel where the
+    /// support is 4, the storage `f64` and the CPU has them: what a stage
+    /// that needs one gradient at a time (refraction) calls.
+    #[inline(always)]
+    pub fn value_grad_fast<const S: usize>(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+        #[cfg(target_arch = "x86_64")]
+        if S == 4
+            && crate::simd::Isa::current() != crate::simd::Isa::Portable
+            && T::as_f64_slice(self.coeffs.data()).is_some()
+        {
+            // SAFETY: support 4, f64 storage and AVX2/FMA checked above.
+            return unsafe { self.cubic_value_grad_in(p) };
+        }
+        self.value_grad_in::<S>(p)
+    }
+
     /// [`Field::value_grad_batch`] for cubic kernels over `f64` coefficients
     /// `data`, with AVX2 and FMA: four points at a time locate themselves and
     /// compute their weights in vector lanes, then each point's neighbourhood

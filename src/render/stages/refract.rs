@@ -58,7 +58,7 @@ pub fn refract<const S: usize>(
             pg.z.clamp(0.0, hi[2]),
         ];
         c.kernel_evals += 1;
-        let (_, grad) = ctx.field.value_grad_in::<S>(q);
+        let (_, grad) = ctx.field.value_grad_fast::<S>(q);
         let grad_world = DVec3::from_array(grad) * ctx.inv_spacing;
         let len = grad_world.length();
         let entering = !rays.inside[i];
