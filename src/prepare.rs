@@ -78,8 +78,14 @@ impl Accel {
             let tags = self.octree.tags();
             // SNELL_NO_PATCHES=1 restricts from the coefficients (comparisons).
             let disabled = std::env::var_os("SNELL_NO_PATCHES").is_some();
-            (!disabled && Patches::bytes_for(tags, field.kernel().support()) <= PATCH_BUDGET)
-                .then(|| Patches::build(field, tags, field.separating_iso(self.iso)))
+            (!disabled && Patches::bytes_for(tags, field.kernel().support()) <= PATCH_BUDGET).then(
+                || {
+                    // Sub-cell masks refine the Bézier hull only: the paper's
+                    // BMCC and ACCC are measured at their own resolution.
+                    let sub_cells = matches!(self.method, Method::Bezier(_));
+                    Patches::build(field, tags, field.separating_iso(self.iso), sub_cells)
+                },
+            )
         });
         (
             p.as_ref(),

@@ -115,8 +115,9 @@ pub struct Patches {
     /// `support³` coefficients per tagged cell, `a[p + S(q + S r)]`.
     data: Vec<f64>,
     /// Per tagged cell, which of its 4³ sub-cells can hold the iso-surface
-    /// ([`SubCells`]).
-    masks: Vec<u64>,
+    /// ([`SubCells`]); `None` keeps every sub-cell (the classification's own
+    /// resolution, for the paper's methods).
+    masks: Option<Vec<u64>>,
 }
 
 impl Patches {
@@ -125,10 +126,11 @@ impl Patches {
         tags.count() * (support.pow(3) * 8 + 8) + Bricked::new(tags.cells).len() / 64 * 12
     }
 
-    /// Patches and sub-cell masks of every tagged cell for the (separated)
-    /// iso-value `iso`, computed with the lane routine of the running
-    /// instruction set (so they match on-the-fly patches bit for bit).
-    pub fn build(field: &Field, tags: &Tags, iso: f64) -> Patches {
+    /// Patches of every tagged cell, computed with the lane routine of the
+    /// running instruction set (so they match on-the-fly patches bit for
+    /// bit), and with `sub_cells` their Bézier sub-cell masks for the
+    /// (separated) iso-value `iso`.
+    pub fn build(field: &Field, tags: &Tags, iso: f64, sub_cells: bool) -> Patches {
         let s = field.kernel().support();
         let bricked = Bricked::new(tags.cells);
         let mut words = vec![0u64; bricked.len() / 64];
@@ -188,13 +190,15 @@ impl Patches {
             });
         let beta = bernstein_weights(field);
         let eps = slack(field);
-        let masks = cells
-            .par_iter()
-            .map_init(
-                || SubCells::new(s),
-                |sub, &slot| sub.mask(&cell_bernstein(field, cell_of(slot), iso, &beta), eps),
-            )
-            .collect();
+        let masks = sub_cells.then(|| {
+            cells
+                .par_iter()
+                .map_init(
+                    || SubCells::new(s),
+                    |sub, &slot| sub.mask(&cell_bernstein(field, cell_of(slot), iso, &beta), eps),
+                )
+                .collect()
+        });
         Patches {
             support: s,
             bricked,
@@ -208,7 +212,7 @@ impl Patches {
     /// The sub-cell mask of the patch in `slot` ([`Patches::slot`]).
     #[inline(always)]
     pub fn mask(&self, slot: usize) -> u64 {
-        self.masks[slot]
+        self.masks.as_ref().map_or(u64::MAX, |m| m[slot])
     }
 
     /// The patch of cell `c`, if tagged.
@@ -224,7 +228,10 @@ impl Patches {
     }
 
     pub fn bytes(&self) -> usize {
-        self.data.len() * 8 + self.masks.len() * 8 + self.rank.len() * 4 + self.words.len() * 8
+        self.data.len() * 8
+            + self.masks.as_ref().map_or(0, |m| m.len() * 8)
+            + self.rank.len() * 4
+            + self.words.len() * 8
     }
 
     /// Copies the patches of `slots` into lane layout.
@@ -337,7 +344,7 @@ mod tests {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             let iso = f.separating_iso(120.0);
             let tags = classify(&f, iso, Method::Bmcc).tags;
-            let patches = Patches::build(&f, &tags, iso);
+            let patches = Patches::build(&f, &tags, iso, true);
             let lat = Lattice::new(f.kernel(), dims);
             let off = lat.offset;
             let mut checked = 0;

@@ -137,6 +137,9 @@ pub fn meets_tagged_sub_cell(ray: &CellRay, cell: [i64; 3], t0: f64, t1: f64, ma
     if mask == 0 {
         return false;
     }
+    if mask == u64::MAX {
+        return true;
+    }
     let n = SUB as f64;
     let local = |a: usize, t: f64| n * (ray.ou[a] + t * ray.du[a] - cell[a] as f64);
     let index = |v: f64| (floor_i64(v).clamp(0, SUB as i64 - 1)) as usize;
