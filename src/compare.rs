@@ -118,6 +118,71 @@ pub fn percentile(sorted: &[f64], p: f64) -> f64 {
     sorted[rank.clamp(1, sorted.len()) - 1]
 }
 
+/// One pixel where two hit images disagree.
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
+pub struct Disagreement {
+    pub x: u32,
+    pub y: u32,
+    /// Events along each image's pixel-centre ray.
+    pub events: [f32; 2],
+    /// Backdrop hit of each (`None` where the ray never reached it).
+    pub hit: [Option<[f32; 2]>; 2],
+    /// Hit distance when both reached the backdrop (backdrop units).
+    pub distance: Option<f64>,
+}
+
+/// The pixels where `a` and `b` differ in validity or event count first (in
+/// pixel order), then the largest hit distances, up to `limit` in all: the
+/// cases to look at when two renderers disagree.
+pub fn disagreements(
+    a: &HitImage,
+    b: &HitImage,
+    limit: usize,
+) -> Result<Vec<Disagreement>, CompareError> {
+    if (a.width, a.height) != (b.width, b.height) {
+        return Err(CompareError::Size(a.width, a.height, b.width, b.height));
+    }
+    let hit = |h: &HitImage, i: usize| {
+        (h.u[i].is_finite() && h.v[i].is_finite()).then(|| [h.u[i], h.v[i]])
+    };
+    let row = |i: usize| {
+        let (ha, hb) = (hit(a, i), hit(b, i));
+        let distance = match (ha, hb) {
+            (Some(p), Some(q)) => Some(
+                ((p[0] as f64 - q[0] as f64).powi(2) + (p[1] as f64 - q[1] as f64).powi(2)).sqrt(),
+            ),
+            _ => None,
+        };
+        Disagreement {
+            x: i as u32 % a.width,
+            y: i as u32 / a.width,
+            events: [a.events[i], b.events[i]],
+            hit: [ha, hb],
+            distance,
+        }
+    };
+    let n = a.u.len();
+    let mut out: Vec<Disagreement> = (0..n)
+        .filter(|&i| a.events[i] != b.events[i] || hit(a, i).is_some() != hit(b, i).is_some())
+        .take(limit)
+        .map(row)
+        .collect();
+    if out.len() < limit {
+        let mut rest: Vec<Disagreement> = (0..n)
+            .filter(|&i| a.events[i] == b.events[i] && hit(a, i).is_some() && hit(b, i).is_some())
+            .map(row)
+            .filter(|d| d.distance.is_some_and(|v| v > 0.0))
+            .collect();
+        rest.sort_by(|p, q| {
+            q.distance
+                .unwrap_or(0.0)
+                .total_cmp(&p.distance.unwrap_or(0.0))
+        });
+        out.extend(rest.into_iter().take(limit - out.len()));
+    }
+    Ok(out)
+}
+
 pub fn compare_hits(
     a: &HitImage,
     b: &HitImage,

@@ -27,6 +27,10 @@ pub struct Args {
     /// Write a heat map of the per-pixel colour difference (images only).
     #[arg(long, value_name = "DIFF.png")]
     pub diff: Option<PathBuf>,
+    /// Also list up to N disagreeing pixels (hit images): event or validity
+    /// mismatches first, then the largest hit distances.
+    #[arg(long, value_name = "N")]
+    pub list: Option<usize>,
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
@@ -53,10 +57,40 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         let hb = HitImage::read_exr(&a.b)?;
         let c = compare_hits(&ha, &hb, checker)
             .map_err(|e| anyhow::anyhow!("{} vs {}: {e}", a.a.display(), a.b.display()))?;
+        let listed = match a.list {
+            Some(n) => snell::compare::disagreements(&ha, &hb, n)
+                .map_err(|e| anyhow::anyhow!("{} vs {}: {e}", a.a.display(), a.b.display()))?,
+            None => Vec::new(),
+        };
         if a.json {
-            println!("{}", c.to_json());
+            let mut j = c.to_json();
+            if a.list.is_some() {
+                j["disagreements"] = serde_json::to_value(&listed)?;
+            }
+            println!("{j}");
         } else {
             print!("{}", c.table());
+            if a.list.is_some() {
+                println!(
+                    "pixel (x, y)   events A/B   hit A                    hit B                    distance"
+                );
+                let fmt = |h: Option<[f32; 2]>| match h {
+                    Some(p) => format!("({:.4}, {:.4})", p[0], p[1]),
+                    None => "none".to_string(),
+                };
+                for d in &listed {
+                    println!(
+                        "({:4}, {:4})   {:>3}/{:<3}     {:24} {:24} {}",
+                        d.x,
+                        d.y,
+                        d.events[0],
+                        d.events[1],
+                        fmt(d.hit[0]),
+                        fmt(d.hit[1]),
+                        d.distance.map_or("-".to_string(), |v| format!("{v:.3e}"))
+                    );
+                }
+            }
         }
         return Ok(());
     }
