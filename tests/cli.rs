@@ -593,14 +593,21 @@ fn image_over_the_memory_limit_is_refused() {
 }
 
 /// Separate processes with 1 and 2 worker threads, and with another tile
-/// size, write byte-identical hit-position EXRs (and PNGs).
+/// size, and from a cold and a warm `--cache`, write byte-identical
+/// hit-position EXRs (and PNGs).
 #[test]
 fn hits_are_bitwise_identical_across_threads_and_tiles() {
     let t = Tmp::new("determinism");
-    let runs: [(&str, &[&str]); 3] = [
+    let cache = t.path("cache");
+    let cache = cache.to_str().unwrap();
+    // The cached runs: the first fills the cache, the second renders from
+    // coefficients and tags read back from disk; both must match exactly.
+    let runs: [(&str, &[&str]); 5] = [
         ("t1", &["--threads", "1"]),
         ("t2", &["--threads", "2"]),
         ("t2-tile7", &["--threads", "2", "--set", "render.tile=7"]),
+        ("cache-cold", &["--cache", cache]),
+        ("cache-warm", &["--cache", cache]),
     ];
     let mut outputs = Vec::new();
     for (name, extra) in runs {
@@ -629,6 +636,11 @@ fn hits_are_bitwise_identical_across_threads_and_tiles() {
     assert_eq!((h.width, h.height), (90, 70));
     let refracted = h.events.iter().filter(|&&e| e >= 2.0).count();
     assert!(refracted > 500, "{refracted} refracted pixels");
+    let cached = std::fs::read_dir(&t.path("cache")).unwrap().count();
+    assert!(
+        cached >= 2,
+        "{cached} files in the cache (coefficients and tags)"
+    );
     let (_, hits1, png1) = &outputs[0];
     for (name, hits, png) in &outputs[1..] {
         assert!(hits == hits1, "{name}: hit EXR differs from --threads 1");

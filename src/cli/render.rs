@@ -39,6 +39,11 @@ pub struct Args {
     /// Override a scene value, e.g. --set surface.ior=1.33 (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     pub set: Vec<String>,
+    /// Keep prefiltered coefficients and cell tags in DIR, keyed by the
+    /// volume's content hash, and reuse them in later runs (a re-render with
+    /// a new camera, ior or backdrop skips the prefilter and classification).
+    #[arg(long, value_name = "DIR")]
+    pub cache: Option<PathBuf>,
     /// Do not print the stats table.
     #[arg(short, long)]
     pub quiet: bool,
@@ -69,7 +74,18 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 
     let mut trace = a.trace.as_ref().map(|_| render::Trace::new());
     let prep_start = Instant::now();
-    let prep = pool.install(|| Prepared::for_scene(&scene, &LoadOptions::default()))?;
+    let prep = match &a.cache {
+        Some(dir) => {
+            let mut cache = snell::prepare::Cache::with_dir(dir)
+                .with_context(|| format!("cache directory {}", dir.display()))?;
+            let prep = pool.install(|| cache.prepare(&scene, &LoadOptions::default()))?;
+            for w in &cache.warnings {
+                eprintln!("warning: {w}");
+            }
+            prep
+        }
+        None => pool.install(|| Prepared::for_scene(&scene, &LoadOptions::default()))?,
+    };
     if let Some(t) = &mut trace {
         t.prepare(prep_start, prep_start.elapsed(), &prep.times);
     }
