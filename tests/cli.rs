@@ -636,7 +636,7 @@ fn hits_are_bitwise_identical_across_threads_and_tiles() {
     assert_eq!((h.width, h.height), (90, 70));
     let refracted = h.events.iter().filter(|&&e| e >= 2.0).count();
     assert!(refracted > 500, "{refracted} refracted pixels");
-    let cached = std::fs::read_dir(&t.path("cache")).unwrap().count();
+    let cached = std::fs::read_dir(t.path("cache")).unwrap().count();
     assert!(
         cached >= 2,
         "{cached} files in the cache (coefficients and tags)"
