@@ -148,7 +148,9 @@ fn pov_files_hold_the_scene() {
         "up <0.0, 0.3526539614169",
         "density_file df3 \"volume.df3\" interpolate 2 frequency 0",
         "function { 0.5 - Density((x + 1) / 66, (y + 1) / 66, (z + 1) / 66) }",
-        "contained_by { box { <0, 0, 0>, <63, 63, 63> } }",
+        // Radius 20, σ 3: the iso surface at r ≈ 23.5 around 31.5, widened by
+        // the Catmull-Rom bound's cell (the whole grid would be 0..63).
+        "contained_by { box { <6.0, 6.0, 6.0>, <57.0, 57.0, 57.0> } }",
         "threshold 0",
         "accuracy 0.001",
         "max_trace 1",

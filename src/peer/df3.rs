@@ -440,6 +440,62 @@ pub fn max_gradient_sampled(
     }
 }
 
+/// The smallest grid-aligned box `[lo, hi]` (grid coordinates, inclusive)
+/// outside of which POV-Ray's interpolant of `vol` stays at or below `iso`
+/// (native units): the `contained_by` box.
+///
+/// POV-Ray finds surfaces only inside `contained_by` and spends its root
+/// search on every ray segment through it, so the box should be tight — but
+/// it must hold the whole inside region, not just the surface (an object
+/// cut open by the data's edge is inside right up to that face). A knot cell
+/// joins the box when its conservative upper bound reaches `iso` ([`CellBound`]:
+/// the sample range for trilinear, signed-weight intervals for Catmull-Rom's
+/// overshoot), lowered by one DF3 count for the quantization and POV-Ray's
+/// single-precision evaluation. `None` when no cell can reach `iso` (the
+/// isosurface is empty; any box then renders the same).
+///
+/// [`CellBound`]: crate::classify::bound::CellBound
+pub fn containing_box(
+    vol: &Volume,
+    m: &Df3Mapping,
+    interp: Interpolation,
+    iso: f64,
+) -> Option<([usize; 3], [usize; 3])> {
+    let dims = vol.dims();
+    if dims.iter().any(|&n| n < 2) {
+        return Some(([0; 3], dims.map(|n| n.saturating_sub(1))));
+    }
+    let field = crate::filter::Field::new(vol, interp.filter());
+    let bound = crate::classify::bound::CellBound::new(field.kernel());
+    let count = if m.scale > 0.0 { 1.0 / m.scale } else { 0.0 };
+    let threshold = iso - count - 1e-6 * iso.abs().max(count);
+    let [cx, cy, cz] = dims.map(|n| n - 1);
+    let merge =
+        |a: Option<([usize; 3], [usize; 3])>, b: Option<([usize; 3], [usize; 3])>| match (a, b) {
+            (Some((al, ah)), Some((bl, bh))) => Some((
+                std::array::from_fn(|i| al[i].min(bl[i])),
+                std::array::from_fn(|i| ah[i].max(bh[i])),
+            )),
+            (a, None) => a,
+            (None, b) => b,
+        };
+    (0..cz)
+        .into_par_iter()
+        .map(|z| {
+            let mut found = None;
+            for y in 0..cy {
+                for x in 0..cx {
+                    let (_, hi) = bound.range(&field, [x as i64, y as i64, z as i64], iso);
+                    if hi >= threshold {
+                        found = merge(found, Some(([x, y, z], [x + 1, y + 1, z + 1])));
+                    }
+                }
+            }
+            found
+        })
+        .reduce(|| None, merge)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -454,6 +510,63 @@ mod tests {
         assert_eq!(mirror(3, 2), 1);
         assert_eq!(mirror(-1, 2), 1);
         assert_eq!(mirror(7, 1), 0);
+    }
+
+    /// The box holds every point where the interpolant exceeds the iso-value
+    /// (dense sampling), including an inside region cut open by the data's
+    /// edge, and is tighter than the grid.
+    #[test]
+    fn containing_box_holds_the_inside() {
+        let n = 16usize;
+        let mut s = Vec::new();
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    // A ball around (7, 6, 5) plus a slab x < 1.5 that meets the x = 0 face.
+                    let r = ((x as f64 - 7.0).powi(2)
+                        + (y as f64 - 6.0).powi(2)
+                        + (z as f64 - 5.0).powi(2))
+                    .sqrt();
+                    let ball = (2.5 - r).clamp(0.0, 1.0);
+                    let slab = if x == 0 && (4..8).contains(&y) && z == 3 {
+                        1.0
+                    } else {
+                        0.0
+                    };
+                    s.push((255.0 * f64::max(ball, slab)).round() as f32);
+                }
+            }
+        }
+        let v = Volume::new([n; 3], [1.0; 3], SampleType::U8, s).unwrap();
+        let m = Df3Mapping::for_volume(&v).unwrap();
+        let iso = 100.0;
+        for interp in [Interpolation::Trilinear, Interpolation::Tricubic] {
+            let (lo, hi) = containing_box(&v, &m, interp, iso).unwrap();
+            assert_eq!(lo[0], 0, "{interp:?}: the slab touches x = 0");
+            assert!(
+                hi[0] < n - 1 && lo[2] > 0,
+                "{interp:?}: not tight: {lo:?} {hi:?}"
+            );
+            let field = crate::filter::Field::new(&v, interp.filter());
+            let k = 4 * (n - 1);
+            for p in 0..=k * k * k {
+                let g = [
+                    p % (k + 1),
+                    (p / (k + 1)) % (k + 1),
+                    p / ((k + 1) * (k + 1)),
+                ]
+                .map(|i| i as f64 / 4.0);
+                if field.value(glam::DVec3::from(g)) > iso {
+                    for a in 0..3 {
+                        assert!(
+                            lo[a] as f64 <= g[a] && g[a] <= hi[a] as f64,
+                            "{interp:?}: {g:?} outside {lo:?}..{hi:?}"
+                        );
+                    }
+                }
+            }
+        }
+        assert_eq!(containing_box(&v, &m, Interpolation::Tricubic, 400.0), None);
     }
 
     #[test]

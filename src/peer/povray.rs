@@ -18,7 +18,8 @@
 //! - **Volume**: the isosurface lives in grid coordinates,
 //!   `function { iso_density - Density((x+1)/Mx, (y+1)/My, (z+1)/Mz) }`,
 //!   `M = N + 2` ([`super::df3`]: a mirror border, sample `i` at pattern
-//!   coordinate `(i+1)/M`), `contained_by { box { 0, N-1 } }`, then
+//!   coordinate `(i+1)/M`), `contained_by` the grid-aligned box of the cells
+//!   that can reach the iso-value (within `0..N-1`), then
 //!   `scale spacing`: sample `(i, j, k)` lands on world `(i·sx, j·sy, k·sz)`.
 //!   `accuracy` and `max_gradient` are therefore in grid units.
 //! - **Surface**: POV-Ray's inside is `function < threshold`; with
@@ -69,7 +70,9 @@ use std::time::Instant;
 use glam::DVec3;
 
 use super::PeerError;
-use super::df3::{Df3Mapping, Interpolation, gradient_safety, max_gradient, write_df3};
+use super::df3::{
+    Df3Mapping, Interpolation, containing_box, gradient_safety, max_gradient, write_df3,
+};
 use crate::atomic::write_atomic;
 use crate::film::HitImage;
 use crate::scene::{Pattern, Projection, Scene};
@@ -263,6 +266,10 @@ pub struct PovExport {
     /// `ior / outside_ior`.
     pub ior: f64,
     pub max_trace_level: u32,
+    /// `contained_by` box corners in grid coordinates: the knot cells whose
+    /// upper bound reaches the iso-value ([`super::df3::containing_box`]),
+    /// the whole grid when none does.
+    pub contained_by: [[usize; 3]; 2],
     pub spacing: [f64; 3],
     pub encoding: HitEncoding,
     /// True when the colour render shows a photograph (`backdrop.png`).
@@ -339,6 +346,10 @@ pub fn export(
         accuracy: opts.accuracy,
         ior: scene.surface.ior / scene.surface.outside_ior,
         max_trace_level: scene.render.max_events.clamp(1, MAX_TRACE_LEVEL),
+        contained_by: containing_box(vol, &mapping, opts.interpolation, scene.surface.iso).map_or(
+            [[0; 3], vol.dims().map(|n| n.saturating_sub(1))],
+            |(lo, hi)| [lo, hi],
+        ),
         spacing: vol.spacing(),
         encoding: HitEncoding::for_scene(scene),
         photo,
@@ -469,14 +480,13 @@ pub fn pov_source(scene: &Scene, ex: &PovExport, variant: Variant) -> Result<Str
     let _ = writeln!(
         w,
         "isosurface {{\n  function {{ {} - Density((x + 1) / {mx}, (y + 1) / {my}, (z + 1) / {mz}) }}\n  \
-         contained_by {{ box {{ <0, 0, 0>, <{}, {}, {}> }} }}\n  threshold 0\n  accuracy {}\n  \
+         contained_by {{ box {{ {}, {} }} }}\n  threshold 0\n  accuracy {}\n  \
          max_gradient {}\n  max_trace 1\n  \
          texture {{ pigment {{ rgbf 1 }} finish {{ ambient 0 diffuse 0 specular 0 phong 0 reflection 0 }} }}\n  \
          interior {{ ior {} }}\n  scale <{}, {}, {}>\n}}",
         num(ex.iso_density),
-        nx - 1,
-        ny - 1,
-        nz - 1,
+        vec3(ex.contained_by[0].map(|c| c as f64).into()),
+        vec3(ex.contained_by[1].map(|c| c as f64).into()),
         num(ex.accuracy),
         num(ex.max_gradient),
         num(ex.ior),
