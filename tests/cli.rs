@@ -234,10 +234,17 @@ fn iso_outside_the_data_is_a_warning_and_a_backdrop_image() {
         "--set",
         "image.height=32",
         "-q",
+        "--hits",
+        t.path("b.exr").to_str().unwrap(),
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stderr(&o).contains("warning") && stderr(&o).contains("outside the data range"));
     assert!(png.exists());
+    // Every ray goes straight to the backdrop: no crossing anywhere.
+    let h = snell::film::HitImage::read_exr(&t.path("b.exr")).unwrap();
+    assert_eq!(h.events.len(), 32 * 32);
+    assert!(h.events.iter().all(|&e| e == 0.0), "crossings found");
+    assert!(h.u.iter().chain(&h.v).all(|x| x.is_finite()), "every ray hits the backdrop");
 }
 
 /// One bad input for `snell`: what it is, the arguments (run in the test's
