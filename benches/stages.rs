@@ -182,11 +182,55 @@ fn refraction(c: &mut Criterion) {
     });
 }
 
+/// The post stage on a fixed hit image: the sphere scene's pixel-centre
+/// hits at 256×256, coloured by PRSS (default bicubic map, and the paper's
+/// bilinear 4×4) and by the footprint filters.
+fn post(c: &mut Criterion) {
+    use snell::film::prss::{self, Mode, PostSettings};
+    use snell::scene::{FootprintFilter, PrssMap, Scene};
+    let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+    let scene = Scene::load(
+        &root.join("scenes/sphere.toml"),
+        &[
+            "image.width=256".into(),
+            "image.height=256".into(),
+            "render.traversal=octree".into(),
+        ],
+    )
+    .unwrap();
+    let film = snell::render::render_scene(&scene).unwrap().film;
+    let base = PostSettings::new(Mode::Prss, &scene.render);
+    let paper = PostSettings {
+        samples: 4,
+        map: PrssMap::Bilinear,
+        ..base
+    };
+    let footprint = PostSettings {
+        mode: Mode::Footprint,
+        ..base
+    };
+    let ewa = PostSettings {
+        footprint: FootprintFilter::Ewa,
+        ..footprint
+    };
+    let mut g = c.benchmark_group("post-256^2");
+    for (name, s) in [
+        ("prss", base),
+        ("prss-paper", paper),
+        ("footprint-box", footprint),
+        ("footprint-ewa", ewa),
+    ] {
+        g.bench_function(name, |b| {
+            b.iter(|| prss::shade(black_box(&film), &scene.backdrop, scene.background, &s))
+        });
+    }
+}
+
 criterion_group! {
     name = stages;
     // Numbers only: criterion's HTML plots need fonts the plotters build
     // shared with `snell bench` does not carry.
     config = Criterion::default().without_plots();
-    targets = prefilter, evaluation, crossing, classification, traversal, refraction
+    targets = prefilter, evaluation, crossing, classification, traversal, refraction, post
 }
 criterion_main!(stages);

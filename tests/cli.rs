@@ -244,7 +244,10 @@ fn iso_outside_the_data_is_a_warning_and_a_backdrop_image() {
     let h = snell::film::HitImage::read_exr(&t.path("b.exr")).unwrap();
     assert_eq!(h.events.len(), 32 * 32);
     assert!(h.events.iter().all(|&e| e == 0.0), "crossings found");
-    assert!(h.u.iter().chain(&h.v).all(|x| x.is_finite()), "every ray hits the backdrop");
+    assert!(
+        h.u.iter().chain(&h.v).all(|x| x.is_finite()),
+        "every ray hits the backdrop"
+    );
 }
 
 /// One bad input for `snell`: what it is, the arguments (run in the test's
