@@ -151,6 +151,71 @@ fn phantom_writes_a_loadable_nrrd() {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
+/// `snell classify` on the paper's ball: every method's tags hold the exact
+/// ones, ACCC tags fewer cells than BMCC (the paper's Table 3 ratio), the
+/// Bézier hull fewer still, and the table form names the methods.
+#[test]
+fn classify_reports_each_method_against_exact() {
+    let t = Tmp::new("classify");
+    let p = t.path("ball.nrrd");
+    let o = run(&[
+        "phantom",
+        "sphere",
+        "--size",
+        "32",
+        "--radius",
+        "10",
+        "--sigma",
+        "1.5",
+        "--format",
+        "u8",
+        "-o",
+        p.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let p = p.to_str().unwrap();
+    let o = run(&[
+        "classify", p, "--filter", "bspline3", "--iso", "127.5", "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    assert_eq!(j["lattice"], serde_json::json!([31, 31, 31]));
+    let methods = j["methods"].as_array().unwrap();
+    let tagged = |name: &str| {
+        let m = methods.iter().find(|m| m["method"] == name).unwrap();
+        assert_eq!(m["contains_exact"], true, "{name} misses exact cells");
+        m["tagged"].as_u64().unwrap()
+    };
+    let (bmcc, accc, bezier, exact) = (
+        tagged("bmcc"),
+        tagged("accc"),
+        tagged("bezier"),
+        tagged("exact"),
+    );
+    assert!(
+        exact > 0 && exact <= bezier && bezier < accc && accc < bmcc,
+        "{methods:?}"
+    );
+    let ratio = j["accc_over_bmcc"].as_f64().unwrap();
+    assert!((ratio - accc as f64 / bmcc as f64).abs() < 1e-12);
+    // The iso-surface (r ≈ 11.8) crosses about 1.5·4π·11.8² ≈ 2600 cells.
+    assert!((1000..4000).contains(&exact), "{exact} exact cells");
+
+    let o = run(&[
+        "classify",
+        p,
+        "--filter",
+        "catmull-rom",
+        "--iso",
+        "127.5",
+        "--methods",
+        "bmcc,accc",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains("bmcc") && out.contains("accc"), "{out}");
+}
+
 #[test]
 fn render_writes_every_output() {
     let t = Tmp::new("render");
