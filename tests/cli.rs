@@ -723,6 +723,139 @@ fn hits_are_bitwise_identical_across_threads_and_tiles() {
     }
 }
 
+/// A frame rendered as three `--region` parts and joined by `snell merge`
+/// equals the whole-frame render bit for bit — hit positions and colour —
+/// with each post stage that reads neighbouring pixels (PRSS with both
+/// fallbacks, the EWA footprint) and with real supersampling.
+#[test]
+fn region_parts_merge_to_the_whole_frame() {
+    let t = Tmp::new("region");
+    let sphere = root().join(SPHERE);
+    let sphere = sphere.to_str().unwrap();
+    let bits = |p: &Path| -> Vec<(String, Vec<u32>)> {
+        let part = snell::film::merge::read_part(p).unwrap();
+        assert_eq!((part.at.origin, part.at.full), ([0, 0], [96, 80]));
+        part.channels
+            .into_iter()
+            .map(|(n, d)| (n, d.iter().map(|x| x.to_bits()).collect()))
+            .collect()
+    };
+    let modes: [&[&str]; 4] = [
+        &["render.supersampling=prss"],
+        &[
+            "render.supersampling=prss",
+            "render.prss_fallback=blend-trace",
+        ],
+        &["render.supersampling=footprint", "render.footprint=ewa"],
+        &["render.supersampling=grid", "render.samples=2"],
+    ];
+    for (m, sets) in modes.iter().enumerate() {
+        let render = |name: &str, region: Option<&str>| {
+            let mut cmd = bin();
+            cmd.args(["render", sphere, "-q", "--set", "image.width=96"])
+                .args([
+                    "--set",
+                    "image.height=80",
+                    "--set",
+                    "render.traversal=octree",
+                ])
+                .arg("-o")
+                .arg(t.path(&format!("{name}.png")))
+                .arg("--hits")
+                .arg(t.path(&format!("{name}-hits.exr")))
+                .arg("--exr")
+                .arg(t.path(&format!("{name}-color.exr")));
+            for s in *sets {
+                cmd.args(["--set", s]);
+            }
+            if let Some(r) = region {
+                cmd.args(["--region", r]);
+            }
+            let o = cmd.output().unwrap();
+            assert!(o.status.success(), "{sets:?} {region:?}: {}", stderr(&o));
+        };
+        let whole = format!("whole{m}");
+        render(&whole, None);
+        let regions = ["0,0,37,50", "37,0,96,50", "0,50,96,80"];
+        for (k, r) in regions.iter().enumerate() {
+            render(&format!("part{m}-{k}"), Some(r));
+        }
+        let part = image::open(t.path(&format!("part{m}-1.png"))).unwrap();
+        assert_eq!((part.width(), part.height()), (59, 50));
+        for kind in ["hits", "color"] {
+            let merged = t.path(&format!("merged{m}-{kind}.exr"));
+            let mut cmd = bin();
+            cmd.arg("merge");
+            for k in [2, 0, 1] {
+                cmd.arg(t.path(&format!("part{m}-{k}-{kind}.exr")));
+            }
+            cmd.arg("-o").arg(&merged);
+            if kind == "color" {
+                cmd.arg("--png").arg(t.path(&format!("merged{m}.png")));
+            }
+            let o = cmd.output().unwrap();
+            assert!(o.status.success(), "{}", stderr(&o));
+            let want = bits(&t.path(&format!("{whole}-{kind}.exr")));
+            assert!(
+                bits(&merged) == want,
+                "{sets:?}: merged {kind} differ from the whole frame"
+            );
+        }
+        let png = |n: &str| image::open(t.path(n)).unwrap().to_rgb8().into_raw();
+        assert!(png(&format!("merged{m}.png")) == png(&format!("{whole}.png")));
+    }
+    // A missing part, overlapping parts and hit parts into a PNG are errors.
+    let part = |k: usize| t.path(&format!("part0-{k}-hits.exr"));
+    let out = t.path("bad.exr");
+    let o = bin()
+        .arg("merge")
+        .arg(part(0))
+        .arg(part(1))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_fails(&o, &["2880 of 7680 pixels uncovered", "(0, 50)"]);
+    let o = bin()
+        .args(["merge"])
+        .arg(part(0))
+        .arg(part(0))
+        .arg(part(1))
+        .arg(part(2))
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_fails(&o, &["both cover pixel (0, 0)"]);
+    let o = bin()
+        .arg("merge")
+        .arg(part(0))
+        .arg(part(1))
+        .arg(part(2))
+        .arg("-o")
+        .arg(&out)
+        .arg("--png")
+        .arg(t.path("bad.png"))
+        .output()
+        .unwrap();
+    assert_fails(&o, &["no R, G, B channels"]);
+    assert!(!out.exists() && !t.path("bad.png").exists());
+    let o = bin()
+        .args(["render", sphere, "-o"])
+        .arg(t.path("r.png"))
+        .args(["--region", "0,0,600,10"])
+        .output()
+        .unwrap();
+    assert_fails(&o, &["--region", "X1 <= 512"]);
+    let o = bin()
+        .args(["render", sphere, "-o"])
+        .arg(t.path("r.png"))
+        .args(["--region", "5,5,5"])
+        .output()
+        .unwrap();
+    assert_fails(&o, &["--region '5,5,5'", "X0,Y0,X1,Y1"]);
+}
+
 /// A `w×h` grey PNG whose value at `(x, y)` is `f(x, y)`.
 fn grey_png(t: &Tmp, name: &str, w: u32, h: u32, f: impl Fn(u32, u32) -> u8) -> PathBuf {
     let p = t.path(name);

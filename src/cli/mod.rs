@@ -6,6 +6,7 @@ mod common;
 mod compare;
 mod export_pov;
 mod info;
+mod merge;
 mod phantom;
 mod reference;
 mod render;
@@ -38,6 +39,8 @@ enum Command {
     Phantom(phantom::Args),
     /// Render a scene file to PNG, with optional hit-position EXR, float EXR and stats.
     Render(render::Args),
+    /// Join the EXR parts of a frame rendered piecewise (`render --region`) into one image.
+    Merge(merge::Args),
     /// Trace a sphere-phantom scene through its exact analytic spheres (the accuracy reference).
     Reference(reference::Args),
     /// Compare two hit-position EXRs: hit-error percentiles, validity and event mismatches.
@@ -57,6 +60,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sample(a) => sample::run(a),
         Command::Phantom(a) => phantom::run(a),
         Command::Render(a) => render::run(a),
+        Command::Merge(a) => merge::run(a),
         Command::Reference(a) => reference::run(a),
         Command::Compare(a) => compare::run(a),
         Command::Classify(a) => classify::run(a),

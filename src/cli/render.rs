@@ -44,6 +44,12 @@ pub struct Args {
     /// a new camera, ior or backdrop skips the prefilter and classification).
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
+    /// Render only the pixels [X0, X1) × [Y0, Y1) of the image: one part of a
+    /// frame split across jobs. The PNG holds the region; the EXRs place it in
+    /// the whole image (OpenEXR data window), for `snell merge`. The pixels
+    /// are bitwise those of a whole-frame render.
+    #[arg(long, value_name = "X0,Y0,X1,Y1")]
+    pub region: Option<String>,
     /// Do not print the stats table.
     #[arg(short, long)]
     pub quiet: bool,
@@ -63,6 +69,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     {
         check_output(p)?;
     }
+    let window = a
+        .region
+        .as_deref()
+        .map(|r| parse_region(r, scene.width, scene.height))
+        .transpose()?;
     let threads = a.threads.unwrap_or(0);
     if a.threads == Some(0) {
         anyhow::bail!("--threads must be at least 1");
@@ -103,14 +114,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.scene.display()
         );
     }
-    let tiles = render::tile::tiles(scene.width, scene.height, scene.render.tile).len();
+    let tiles = render::tile_count(&scene, window);
     let done = AtomicUsize::new(0);
     let frame = std::thread::scope(|s| {
         // The render runs inside the pool, so --threads sets its tile workers.
         let worker = s.spawn(|| {
-            pool.install(|| match &mut trace {
-                Some(t) => render::render_traced(&scene, &prep, Some(&done), t),
-                None => render::render(&scene, &prep, Some(&done)),
+            pool.install(|| match (window, &mut trace) {
+                (Some(w), t) => render::render_window(&scene, &prep, w, Some(&done), t.as_mut()),
+                (None, Some(t)) => render::render_traced(&scene, &prep, Some(&done), t),
+                (None, None) => render::render(&scene, &prep, Some(&done)),
             })
         });
         progress_bar(&done, tiles, &worker);
@@ -175,4 +187,24 @@ fn progress_bar<T>(done: &AtomicUsize, total: usize, worker: &std::thread::Scope
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+}
+
+/// `X0,Y0,X1,Y1`: a non-empty pixel rectangle inside the `width × height` image.
+fn parse_region(s: &str, width: u32, height: u32) -> anyhow::Result<render::tile::Tile> {
+    let v: Vec<u32> = s
+        .split(',')
+        .map(|p| p.trim().parse::<u32>())
+        .collect::<Result<_, _>>()
+        .ok()
+        .filter(|v: &Vec<u32>| v.len() == 4)
+        .with_context(|| {
+            format!("--region '{s}': expected X0,Y0,X1,Y1 (four non-negative integers)")
+        })?;
+    let (x0, y0, x1, y1) = (v[0], v[1], v[2], v[3]);
+    if x0 >= x1 || y0 >= y1 || x1 > width || y1 > height {
+        anyhow::bail!(
+            "--region {s}: need X0 < X1 <= {width} and Y0 < Y1 <= {height} (the image is {width}x{height}; X1, Y1 exclusive)"
+        );
+    }
+    Ok(render::tile::Tile { x0, y0, x1, y1 })
 }

@@ -9,18 +9,19 @@
 
 pub mod footprint;
 pub(crate) mod hitmap;
+pub mod merge;
 pub mod metrics;
 pub mod prss;
 
 use std::path::{Path, PathBuf};
 
 use exr::prelude::{
-    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, Layer, LayerAttributes, SmallVec,
-    WritableImage, read_first_flat_layer_from_file,
+    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, ImageAttributes, IntegerBounds, Layer,
+    LayerAttributes, SmallVec, Vec2, WritableImage, read_first_flat_layer_from_file,
 };
 
 use crate::atomic::write_atomic;
-use crate::render::tile::{Region, TileOut};
+use crate::render::tile::{Region, Tile, TileOut};
 
 #[derive(Debug, thiserror::Error)]
 pub enum FilmError {
@@ -31,10 +32,20 @@ pub enum FilmError {
 }
 
 /// Per-pixel buffers of a frame, row-major, row 0 at the top.
+///
+/// A film covers a window of the image: all of it for a whole frame, or a
+/// rectangle at `origin` of a `full`-sized image (a `--region` render, one
+/// part of a frame split across machines). Its EXR files carry the window as
+/// OpenEXR's data window inside the full display window, so `snell merge`
+/// (and any compositor) puts the parts back in place.
 #[derive(Clone, Debug)]
 pub struct Film {
     pub width: u32,
     pub height: u32,
+    /// Top-left pixel of this film in the image.
+    pub origin: [u32; 2],
+    /// Size of the whole image.
+    pub full: [u32; 2],
     pub u: Vec<f32>,
     pub v: Vec<f32>,
     pub events: Vec<f32>,
@@ -52,11 +63,28 @@ pub struct HitImage {
 }
 
 impl Film {
+    /// A whole-image film.
     pub fn new(width: u32, height: u32) -> Film {
+        Film::window(
+            Tile {
+                x0: 0,
+                y0: 0,
+                x1: width,
+                y1: height,
+            },
+            [width, height],
+        )
+    }
+
+    /// A film for the pixels of `window` in an image of size `full`.
+    pub fn window(window: Tile, full: [u32; 2]) -> Film {
+        let (width, height) = (window.width(), window.height());
         let n = (width as usize) * (height as usize);
         Film {
             width,
             height,
+            origin: [window.x0, window.y0],
+            full,
             u: vec![f32::NAN; n],
             v: vec![f32::NAN; n],
             events: vec![0.0; n],
@@ -66,13 +94,17 @@ impl Film {
 
     /// Copies a tile's results into place (hit positions only where the tile
     /// traced pixel-centre rays).
+    ///
+    /// Tiles are in image coordinates and must lie inside the film's window.
     pub fn blit(&mut self, t: &TileOut, with_hits: bool) {
+        let [ox, oy] = self.origin.map(|o| o as usize);
         match &t.region {
             Region::Rect(tile) => {
                 let tw = tile.width() as usize;
                 for row in 0..tile.height() as usize {
                     let src = row * tw;
-                    let dst = (tile.y0 as usize + row) * self.width as usize + tile.x0 as usize;
+                    let dst =
+                        (tile.y0 as usize - oy + row) * self.width as usize + tile.x0 as usize - ox;
                     if with_hits {
                         self.u[dst..dst + tw].copy_from_slice(&t.u[src..src + tw]);
                         self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
@@ -82,8 +114,10 @@ impl Film {
                 }
             }
             Region::List(pixels) => {
+                let full_w = self.full[0] as usize;
                 for (k, &p) in pixels.iter().enumerate() {
                     let p = p as usize;
+                    let p = (p / full_w - oy) * self.width as usize + p % full_w - ox;
                     if with_hits {
                         self.u[p] = t.u[k];
                         self.v[p] = t.v[k];
@@ -92,6 +126,47 @@ impl Film {
                     self.color[p] = t.color[k];
                 }
             }
+        }
+    }
+
+    /// The pixels of `window` (image coordinates, inside this film's window)
+    /// as a film of their own.
+    pub fn crop(&self, window: Tile) -> Film {
+        let [ox, oy] = self.origin;
+        assert!(
+            window.x0 >= ox
+                && window.y0 >= oy
+                && window.x1 <= ox + self.width
+                && window.y1 <= oy + self.height,
+            "crop window outside the film"
+        );
+        let rows = |buf: &[f32]| -> Vec<f32> { self.crop_rows(buf, window) };
+        let mut out = Film::window(window, self.full);
+        out.u = rows(&self.u);
+        out.v = rows(&self.v);
+        out.events = rows(&self.events);
+        out.color = self.crop_rows(&self.color, window);
+        out
+    }
+
+    fn crop_rows<T: Copy>(&self, buf: &[T], window: Tile) -> Vec<T> {
+        let (x0, w) = (
+            (window.x0 - self.origin[0]) as usize,
+            window.width() as usize,
+        );
+        (window.y0..window.y1)
+            .flat_map(|y| {
+                let start = (y - self.origin[1]) as usize * self.width as usize + x0;
+                buf[start..start + w].iter().copied()
+            })
+            .collect()
+    }
+
+    /// The film's place in the image, for its EXR files.
+    fn placement(&self) -> Placement {
+        Placement {
+            origin: self.origin,
+            full: self.full,
         }
     }
 
@@ -114,18 +189,37 @@ impl Film {
     /// Float RGB EXR of the colour image.
     pub fn write_color_exr(&self, path: &Path) -> Result<(), FilmError> {
         let c = |k: usize| self.color.iter().map(|p| p[k]).collect::<Vec<f32>>();
-        write_exr_channels(
+        write_exr_placed(
             path,
             self.width,
             self.height,
+            self.placement(),
             vec![("R", c(0)), ("G", c(1)), ("B", c(2))],
         )
     }
 
     /// The SPEC.md hit-position EXR.
     pub fn write_hits_exr(&self, path: &Path) -> Result<(), FilmError> {
-        self.hits().write_exr(path)
+        write_exr_placed(
+            path,
+            self.width,
+            self.height,
+            self.placement(),
+            vec![
+                ("u", self.u.clone()),
+                ("v", self.v.clone()),
+                ("events", self.events.clone()),
+            ],
+        )
     }
+}
+
+/// Where an EXR's pixels (its data window) sit in the whole image (its
+/// display window).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Placement {
+    pub origin: [u32; 2],
+    pub full: [u32; 2],
 }
 
 impl HitImage {
@@ -195,17 +289,36 @@ pub fn write_exr_channels(
     height: u32,
     channels: Vec<(&str, Vec<f32>)>,
 ) -> Result<(), FilmError> {
+    let whole = Placement {
+        origin: [0, 0],
+        full: [width, height],
+    };
+    write_exr_placed(path, width, height, whole, channels)
+}
+
+/// [`write_exr_channels`] for a `width × height` window of a larger image:
+/// the data window at `at.origin` inside a display window of `at.full`.
+pub fn write_exr_placed(
+    path: &Path,
+    width: u32,
+    height: u32,
+    at: Placement,
+    channels: Vec<(&str, Vec<f32>)>,
+) -> Result<(), FilmError> {
     let list: SmallVec<[AnyChannel<FlatSamples>; 4]> = channels
         .into_iter()
         .map(|(name, data)| AnyChannel::new(name, FlatSamples::F32(data)))
         .collect();
+    let mut attributes = LayerAttributes::named("snell");
+    attributes.layer_position = Vec2(at.origin[0] as i32, at.origin[1] as i32);
     let layer = Layer::new(
         (width as usize, height as usize),
-        LayerAttributes::named("snell"),
+        attributes,
         Encoding::SMALL_LOSSLESS,
         AnyChannels::sort(list),
     );
-    let image = Image::from_layer(layer);
+    let display = IntegerBounds::from_dimensions((at.full[0] as usize, at.full[1] as usize));
+    let image = Image::new(ImageAttributes::new(display), layer);
     write_atomic(path, |w| {
         image
             .write()

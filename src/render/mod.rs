@@ -56,7 +56,69 @@ pub struct Frame {
 /// the hit positions in a final stage; with the `trace` fallback, the pixels it
 /// cannot interpolate get real sub-pixel rays in a second, adaptive pass.
 pub fn render(scene: &Scene, prep: &Prepared, progress: Option<&AtomicUsize>) -> Frame {
-    render_with(scene, prep, progress, None)
+    render_with(scene, prep, None, progress, None)
+}
+
+/// Pixels of apron a windowed render traces around its window when a post
+/// stage colours the film: PRSS reads hit-map taps up to 2 pixels away and
+/// fits boundaries over `EDGE_RADIUS` = 4, and `blend-trace` marks pixels
+/// from a ring around that; 8 covers all of it (the window's pixels are then
+/// bitwise those of the whole frame, tested).
+pub const POST_APRON: u32 = 8;
+
+/// Renders only the pixels of `window` (image coordinates): one part of a
+/// frame split across processes or machines. The film covers the window
+/// (with its place in the image, see [`Film`]), bitwise equal to the same
+/// pixels of a whole-frame render; `snell merge` joins the parts.
+pub fn render_window(
+    scene: &Scene,
+    prep: &Prepared,
+    window: tile::Tile,
+    progress: Option<&AtomicUsize>,
+    trace: Option<&mut Trace>,
+) -> Frame {
+    render_with(scene, prep, Some(window), progress, trace)
+}
+
+/// The tiles a render of `window` (the whole image when `None`) traces in
+/// its first pass, for progress bars.
+pub fn tile_count(scene: &Scene, window: Option<tile::Tile>) -> usize {
+    let traced = traced_window(scene, window);
+    tile::tiles(scene.width, scene.height, scene.render.tile)
+        .into_iter()
+        .filter(|t| t.intersect(&traced).is_some())
+        .count()
+}
+
+fn post_mode(scene: &Scene) -> Option<prss::Mode> {
+    match scene.render.supersampling {
+        Supersampling::Prss => Some(prss::Mode::Prss),
+        Supersampling::Footprint => Some(prss::Mode::Footprint),
+        _ => None,
+    }
+}
+
+/// The pixels a render of `window` traces: the window and, when a post stage
+/// reads neighbours, its apron, within the image.
+fn traced_window(scene: &Scene, window: Option<tile::Tile>) -> tile::Tile {
+    let image = tile::Tile {
+        x0: 0,
+        y0: 0,
+        x1: scene.width,
+        y1: scene.height,
+    };
+    let Some(w) = window else { return image };
+    let apron = if post_mode(scene).is_some() {
+        POST_APRON
+    } else {
+        0
+    };
+    tile::Tile {
+        x0: w.x0.saturating_sub(apron),
+        y0: w.y0.saturating_sub(apron),
+        x1: w.x1.saturating_add(apron).min(image.x1),
+        y1: w.y1.saturating_add(apron).min(image.y1),
+    }
 }
 
 /// [`render`], recording a timeline of every tile and stage into `trace`
@@ -67,12 +129,13 @@ pub fn render_traced(
     progress: Option<&AtomicUsize>,
     trace: &mut Trace,
 ) -> Frame {
-    render_with(scene, prep, progress, Some(trace))
+    render_with(scene, prep, None, progress, Some(trace))
 }
 
 fn render_with(
     scene: &Scene,
     prep: &Prepared,
+    window: Option<tile::Tile>,
     progress: Option<&AtomicUsize>,
     mut trace: Option<&mut Trace>,
 ) -> Frame {
@@ -89,8 +152,10 @@ fn render_with(
             centre: true,
         },
     };
+    let traced_rect = traced_window(scene, window);
     let regions: Vec<Region> = tile::tiles(scene.width, scene.height, rs.tile)
         .into_iter()
+        .filter_map(|t| t.intersect(&traced_rect))
         .map(Region::Rect)
         .collect();
     let start = Instant::now();
@@ -106,7 +171,7 @@ fn render_with(
         );
         record_tiles(t, &outs, "primary");
     }
-    let mut film = Film::new(scene.width, scene.height);
+    let mut film = Film::window(traced_rect, [scene.width, scene.height]);
     let mut stats = RenderStats {
         threads: rayon::current_num_threads(),
         width: scene.width,
@@ -128,12 +193,7 @@ fn render_with(
         );
     }
 
-    let post_mode = match rs.supersampling {
-        Supersampling::Prss => Some(prss::Mode::Prss),
-        Supersampling::Footprint => Some(prss::Mode::Footprint),
-        _ => None,
-    };
-    if let Some(mode) = post_mode {
+    if let Some(mode) = post_mode(scene) {
         let post_start = Instant::now();
         let settings = prss::PostSettings::new(mode, rs);
         let post = prss::shade(&film, &scene.backdrop, scene.background, &settings);
@@ -152,10 +212,24 @@ fn render_with(
                 serde_json::json!({ "flagged_pixels": post.flagged.len() }),
             );
         }
-        if !post.flagged.is_empty() {
-            stats.retraced_pixels = post.flagged.len() as u64;
-            let regions: Vec<Region> = post
-                .flagged
+        // Flagged film pixels as image pixel indices, the apron's dropped.
+        let keep = window.unwrap_or(traced_rect);
+        let flagged: Vec<u32> = post
+            .flagged
+            .iter()
+            .map(|&p| {
+                let (x, y) = (
+                    p % film.width + film.origin[0],
+                    p / film.width + film.origin[1],
+                );
+                (x, y)
+            })
+            .filter(|&(x, y)| keep.contains(x, y))
+            .map(|(x, y)| y * scene.width + x)
+            .collect();
+        if !flagged.is_empty() {
+            stats.retraced_pixels = flagged.len() as u64;
+            let regions: Vec<Region> = flagged
                 .chunks((rs.tile * rs.tile) as usize)
                 .map(|c| Region::List(c.to_vec()))
                 .collect();
@@ -190,6 +264,11 @@ fn render_with(
                 );
             }
         }
+    }
+    if let Some(w) = window.filter(|&w| w != traced_rect) {
+        let t = Instant::now();
+        film = film.crop(w);
+        film_time += t.elapsed();
     }
     stats.stage_times.add(stats::Stage::Film, film_time);
     stats.wall = start.elapsed();

@@ -30,6 +30,19 @@ impl Tile {
     pub fn pixels(&self) -> usize {
         (self.width() * self.height()) as usize
     }
+    /// The common pixels of two rectangles, if any.
+    pub fn intersect(&self, o: &Tile) -> Option<Tile> {
+        let t = Tile {
+            x0: self.x0.max(o.x0),
+            y0: self.y0.max(o.y0),
+            x1: self.x1.min(o.x1),
+            y1: self.y1.min(o.y1),
+        };
+        (t.x0 < t.x1 && t.y0 < t.y1).then_some(t)
+    }
+    pub fn contains(&self, x: u32, y: u32) -> bool {
+        (self.x0..self.x1).contains(&x) && (self.y0..self.y1).contains(&y)
+    }
 }
 
 /// The pixels one work item covers: a rectangle, or an explicit sorted list
