@@ -74,7 +74,7 @@ pub fn read_part(path: &Path) -> Result<Part, MergeError> {
     };
     let image = read_first_flat_layer_from_file(path).map_err(|e| FilmError::Read {
         path: path.to_path_buf(),
-        msg: e.to_string(),
+        msg: format!("not a readable OpenEXR part ({e})"),
     })?;
     let display = image.attributes.display_window;
     let layer = &image.layer_data;
