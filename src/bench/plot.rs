@@ -1,5 +1,6 @@
 //! Plots of a report, each as PNG and SVG: time against error with the Pareto
-//! front, and CPU time per stage.
+//! front, CPU time per stage, and (for the scaling suite) frame time against
+//! volume and image size.
 //!
 //! Text in the PNGs is drawn with a DejaVu Sans subset compiled into the
 //! binary (see `font/LICENSE.txt`), so plots look the same on every machine
@@ -17,7 +18,8 @@ use plotters::style::{FontStyle, register_font};
 use super::BenchError;
 use super::pareto;
 use super::report::{fmt_ms, fmt_sig, fmt_tick};
-use super::results::{Report, StageMs};
+use super::results::{Report, StageMs, TableResultBody};
+use super::suite::phantom_side;
 
 const FONT: &[u8] = include_bytes!("font/DejaVuSans-subset.ttf");
 const FAMILY: &str = "sans-serif";
@@ -420,6 +422,155 @@ fn draw_stages<DB: DrawingBackend>(
     Ok(())
 }
 
+/// One panel of the scaling plot: frame time against a size.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Scaling {
+    pub title: String,
+    pub x_desc: String,
+    /// `(size, median frame ms)`, sizes increasing.
+    pub points: Vec<(f64, f64)>,
+    /// Reference growth laws `(label, exponent)`, drawn through the first point.
+    pub laws: Vec<(String, f64)>,
+}
+
+/// The scaling panels of a report: `scaling-volume` against the phantom's
+/// side, `scaling-image` against the image's side (empty for other suites).
+pub fn scaling_panels(r: &Report) -> Vec<Scaling> {
+    let mut out = Vec::new();
+    for t in &r.tables {
+        let TableResultBody::Render { rows, .. } = &t.body else {
+            continue;
+        };
+        let size = |c: usize| -> Option<f64> {
+            let c = &r.configurations[c];
+            match t.id.as_str() {
+                "scaling-volume" => phantom_side(&c.overrides).map(|n| n as f64),
+                "scaling-image" => Some(c.settings.width as f64),
+                _ => None,
+            }
+        };
+        let mut points: Vec<(f64, f64)> = rows
+            .iter()
+            .filter_map(|row| {
+                Some((
+                    size(row.config)?,
+                    r.configurations[row.config].wall_ms.median,
+                ))
+            })
+            .filter(|&(x, y)| x > 0.0 && y > 0.0 && y.is_finite())
+            .collect();
+        if points.is_empty() {
+            continue;
+        }
+        points.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let (x_desc, laws) = if t.id == "scaling-volume" {
+            (
+                "phantom side n (voxels; image fixed)",
+                vec![
+                    ("∝ n³ (voxel count)".to_string(), 3.0),
+                    ("∝ n² (surface cells)".to_string(), 2.0),
+                ],
+            )
+        } else {
+            (
+                "image side (pixels; volume fixed)",
+                vec![("∝ side² (pixel count)".to_string(), 2.0)],
+            )
+        };
+        out.push(Scaling {
+            title: t.title.clone(),
+            x_desc: x_desc.into(),
+            points,
+            laws,
+        });
+    }
+    out
+}
+
+fn draw_scaling<DB: DrawingBackend>(
+    area: &DrawingArea<DB, Shift>,
+    title: &str,
+    panels: &[Scaling],
+) -> Result<(), String> {
+    area.fill(&WHITE).map_err(err)?;
+    let area = area.titled(title, (FAMILY, 22)).map_err(err)?;
+    let cells = area.split_evenly((1, panels.len().max(1)));
+    for (panel, cell) in panels.iter().zip(&cells) {
+        let (x0, x1) = log_range(panel.points.iter().map(|p| p.0));
+        let (y0, y1) = log_range(panel.points.iter().map(|p| p.1));
+        let mut chart = ChartBuilder::on(cell)
+            .caption(&panel.title, (FAMILY, 15))
+            .margin(20)
+            .x_label_area_size(50)
+            .y_label_area_size(70)
+            .build_cartesian_2d((x0..x1).log_scale(), (y0..y1).log_scale())
+            .map_err(err)?;
+        chart
+            .configure_mesh()
+            .x_desc(panel.x_desc.as_str())
+            .y_desc("median frame time (ms)")
+            .label_style((FAMILY, 14))
+            .axis_desc_style((FAMILY, 15))
+            .x_label_formatter(&|v| fmt_tick(*v))
+            .y_label_formatter(&|v| fmt_tick(*v))
+            .light_line_style(BLACK.mix(0.04))
+            .bold_line_style(BLACK.mix(0.12))
+            .draw()
+            .map_err(err)?;
+        let (bx, by) = panel.points[0];
+        for (i, (label, k)) in panel.laws.iter().enumerate() {
+            let color = GROUP_COLORS[(i + 1) % GROUP_COLORS.len()];
+            // Only the part of the law inside the chart (it rises steeply).
+            let law: Vec<(f64, f64)> = (0..=64)
+                .map(|j| x0 * (x1 / x0).powf(j as f64 / 64.0))
+                .map(|x| (x, by * (x / bx).powf(*k)))
+                .filter(|&(_, y)| y >= y0 && y <= y1)
+                .collect();
+            chart
+                .draw_series(LineSeries::new(law, color.mix(0.7).stroke_width(2)))
+                .map_err(err)?
+                .label(label.as_str())
+                .legend(move |(x, y)| PathElement::new([(x - 10, y), (x + 10, y)], color));
+        }
+        let color = GROUP_COLORS[0];
+        chart
+            .draw_series(LineSeries::new(
+                panel.points.iter().copied(),
+                color.stroke_width(3),
+            ))
+            .map_err(err)?
+            .label("measured")
+            .legend(move |(x, y)| Circle::new((x, y), 4, color.filled()));
+        chart
+            .draw_series(
+                panel
+                    .points
+                    .iter()
+                    .map(|&p| Circle::new(p, 5, color.filled())),
+            )
+            .map_err(err)?;
+        chart
+            .draw_series(panel.points.iter().map(|&(x, y)| {
+                Text::new(
+                    format!("{} ms", fmt_ms(y)),
+                    (x, y),
+                    (FAMILY, 13).into_font(),
+                )
+            }))
+            .map_err(err)?;
+        chart
+            .configure_series_labels()
+            .label_font((FAMILY, 14))
+            .background_style(WHITE.mix(0.85))
+            .border_style(BLACK.mix(0.4))
+            .position(SeriesLabelPosition::UpperLeft)
+            .draw()
+            .map_err(err)?;
+    }
+    area.present().map_err(err)?;
+    Ok(())
+}
+
 /// Draws into a PNG (RGB buffer, encoded like the renderer's images).
 fn write_png(
     path: &Path,
@@ -466,7 +617,8 @@ fn write_svg(
     )
 }
 
-/// Writes `time_vs_error.{png,svg}` and `stages.{png,svg}` into `dir`.
+/// Writes `time_vs_error.{png,svg}`, `stages.{png,svg}` and, for the
+/// scaling suite, `scaling.{png,svg}` into `dir`.
 pub fn write_plots(r: &Report, dir: &Path) -> Result<Vec<PathBuf>, BenchError> {
     let mut written = Vec::new();
     let points = time_vs_error_points(r);
@@ -491,6 +643,21 @@ pub fn write_plots(r: &Report, dir: &Path) -> Result<Vec<PathBuf>, BenchError> {
     let p = dir.join("stages.svg");
     write_svg(&p, size, |a| draw_stages(a, &title, &bars))?;
     written.push(p);
+
+    let panels = scaling_panels(r);
+    if !panels.is_empty() {
+        let title = format!(
+            "snell bench {}: frame time against size ({} threads)",
+            r.suite, r.run.threads
+        );
+        let size = (700 * panels.len() as u32, 600);
+        let p = dir.join("scaling.png");
+        write_png(&p, size, |a| draw_scaling(a, &title, &panels))?;
+        written.push(p);
+        let p = dir.join("scaling.svg");
+        write_svg(&p, size, |a| draw_scaling(a, &title, &panels))?;
+        written.push(p);
+    }
     Ok(written)
 }
 
@@ -532,6 +699,31 @@ mod tests {
         let bars = stage_bars(&r);
         assert_eq!(bars[0].stages_ms[2], 300.0, "traverse");
         assert_eq!(log_range([1.0, 100.0].into_iter()), (1.0 / 1.6, 160.0));
+    }
+
+    #[test]
+    fn scaling_suite_gets_its_plot() {
+        let mut r = crate::bench::results::sample_report();
+        assert!(scaling_panels(&r).is_empty());
+        for (i, c) in r.configurations.iter_mut().enumerate() {
+            c.overrides.push(format!("volume.phantom.size={}", 64 << i));
+        }
+        r.tables[0].id = "scaling-volume".into();
+        let panels = scaling_panels(&r);
+        assert_eq!(panels.len(), 1);
+        let xs: Vec<f64> = panels[0].points.iter().map(|p| p.0).collect();
+        assert!(
+            xs.windows(2).all(|w| w[0] < w[1]) && xs[0] >= 64.0,
+            "{xs:?}"
+        );
+        let dir = std::env::temp_dir().join(format!("snell-scaling-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        std::fs::create_dir_all(&dir).unwrap();
+        let written = write_plots(&r, &dir).unwrap();
+        assert_eq!(written.len(), 6);
+        let svg = std::fs::read_to_string(dir.join("scaling.svg")).unwrap();
+        assert!(svg.contains("voxel count") && svg.contains("measured"));
+        let _ = std::fs::remove_dir_all(&dir);
     }
 
     #[test]

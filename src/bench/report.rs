@@ -433,9 +433,14 @@ cells with a proven crossing.\n\n",
 
 /// `tables.md`: provenance, the tables and the plots.
 pub fn tables_md(r: &Report) -> String {
+    let scaling = if super::plot::scaling_panels(r).is_empty() {
+        ""
+    } else {
+        "![frame time against size](scaling.svg)\n\n"
+    };
     format!(
         "# snell bench: {} suite\n\n{}\n\n{}\n\n![time vs error](time_vs_error.svg)\n\n\
-![CPU time per stage](stages.svg)\n\n{}",
+![CPU time per stage](stages.svg)\n\n{scaling}{}",
         r.suite,
         r.description,
         provenance(r),

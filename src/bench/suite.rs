@@ -142,7 +142,7 @@ impl ClassifyRow {
 }
 
 /// Names accepted by [`Suite::by_name`] (`smoke` is for tests and not listed).
-pub const SUITES: [&str; 3] = ["quick", "paper", "full"];
+pub const SUITES: [&str; 4] = ["quick", "paper", "full", "scaling"];
 
 impl Suite {
     pub fn by_name(name: &str) -> Result<Suite, BenchError> {
@@ -150,6 +150,7 @@ impl Suite {
             "quick" => Ok(quick()),
             "paper" => Ok(paper()),
             "full" => Ok(full()),
+            "scaling" => Ok(scaling()),
             "smoke" => Ok(smoke()),
             other => Err(BenchError::UnknownSuite(other.to_string())),
         }
@@ -322,6 +323,10 @@ impl Experiment {
     }
     fn repeats_at_most(mut self, n: usize) -> Experiment {
         self.max_repeats = Some(n);
+        self
+    }
+    fn called(mut self, name: impl Into<String>) -> Experiment {
+        self.name = name.into();
         self
     }
 }
@@ -599,6 +604,101 @@ instead.",
     tables
 }
 
+/// Volume sides of the scaling suite (the 1024³ phantom's f64 coefficients
+/// alone take 8.8 GB).
+pub const SCALING_SIDES: [usize; 5] = [64, 128, 256, 512, 1024];
+/// Image sides of the scaling suite.
+pub const SCALING_IMAGES: [u32; 5] = [128, 256, 512, 1024, 2048];
+
+/// Overrides that turn `sphere.toml` into the same picture of an `n`³
+/// phantom: radius, fringe, camera distance, backdrop distance and checker
+/// scale with `n`, so every size shows the same object sampled finer.
+pub fn scaled_sphere(n: usize) -> Vec<String> {
+    let s = n as f64 / 64.0;
+    let c = (n as f64 - 1.0) / 2.0;
+    vec![
+        format!("volume.phantom.size={n}"),
+        format!("volume.phantom.radius={}", 20.0 * s),
+        format!("volume.phantom.sigma={}", 3.0 * s),
+        format!("camera.position=[{c}, {c}, {}]", c - 181.5 * s),
+        format!("camera.look_at=[{c}, {c}, {c}]"),
+        format!("backdrop.center=[{c}, {c}, {}]", c + 168.5 * s),
+        format!("backdrop.checker={}", 8.0 * s),
+    ]
+}
+
+/// The `n` of a scaled-sphere configuration (from its overrides).
+pub fn phantom_side(overrides: &[String]) -> Option<usize> {
+    overrides
+        .iter()
+        .find_map(|o| o.strip_prefix("volume.phantom.size="))
+        .and_then(|v| v.parse().ok())
+}
+
+fn scaling() -> Suite {
+    let config = "octree+bezier bspline3 prss";
+    let volume: Vec<Experiment> = SCALING_SIDES
+        .iter()
+        .map(|&n| {
+            let extra = scaled_sphere(n);
+            let extra: Vec<&str> = extra.iter().map(|s| s.as_str()).collect();
+            exp(
+                &SPHERE,
+                &SIDE_512,
+                "bspline3",
+                "octree+bezier",
+                "prss",
+                &extra,
+            )
+            .named(format!("{n}³"))
+            .called(format!("{config}, sphere {n}³"))
+            .vs("64³")
+        })
+        .collect();
+    let image: Vec<Experiment> = SCALING_IMAGES
+        .iter()
+        .map(|&w| {
+            let size = [format!("image.width={w}"), format!("image.height={w}")];
+            let size: Vec<&str> = size.iter().map(|s| s.as_str()).collect();
+            exp(&SPHERE, &size, "bspline3", "octree+bezier", "prss", &[])
+                .named(format!("{w}×{w}"))
+                .called(format!("{config}, {w}×{w}"))
+                .vs("128×128")
+        })
+        .collect();
+    Suite {
+        name: "scaling".into(),
+        description: "Frame time against volume size (sphere phantoms 64³ to 1024³ at \
+512×512) and against image size (128² to 2048² at 64³): it should follow the surface area \
+crossed, not the voxel count."
+            .into(),
+        budget: "about 10 minutes and 16 GB of memory (the 1024³ phantom)".into(),
+        tables: vec![
+            render_table(
+                "scaling-volume",
+                "Scaling with volume size (sphere n³, 512×512, bspline3, octree+bezier, PRSS)",
+                "The same picture of ever finer phantoms: radius, fringe, camera and backdrop \
+scale with n. Time per frame with everything prepared; the preparation (prefilter, \
+classification, octree) grows with the voxel count and is in the Preparation table. Ratio: \
+frame time over the 64³ frame's; the voxel count grows 4096× from 64³ to 1024³, the surface \
+area in cells 256×.",
+                Comparison::Ratio,
+                false,
+                volume,
+            ),
+            render_table(
+                "scaling-image",
+                "Scaling with image size (sphere 64³, bspline3, octree+bezier, PRSS)",
+                "Ratio: frame time over the 128×128 frame's; the pixel count grows 256× to \
+2048×2048.",
+                Comparison::Ratio,
+                false,
+                image,
+            ),
+        ],
+    }
+}
+
 fn paper() -> Suite {
     Suite {
         name: "paper".into(),
@@ -800,6 +900,30 @@ mod tests {
             Suite::by_name("nope"),
             Err(BenchError::UnknownSuite(_))
         ));
+    }
+
+    /// At n = 64 the scaled overrides are `sphere.toml`'s own geometry, and
+    /// at every n the picture is the same: the scene scales about the centre.
+    #[test]
+    fn scaled_sphere_is_the_same_picture() {
+        let root = std::path::Path::new(env!("CARGO_MANIFEST_DIR"));
+        let load = |set: &[String]| {
+            crate::scene::Scene::load(&root.join("scenes/sphere.toml"), set).unwrap()
+        };
+        let base = load(&[]);
+        let at64 = load(&scaled_sphere(64));
+        assert_eq!(format!("{:?}", base.camera), format!("{:?}", at64.camera));
+        assert_eq!(
+            format!("{:?}", base.backdrop),
+            format!("{:?}", at64.backdrop)
+        );
+        assert_eq!(format!("{:?}", base.volume), format!("{:?}", at64.volume));
+        let big = load(&scaled_sphere(1024));
+        assert_eq!(phantom_side(&scaled_sphere(1024)), Some(1024));
+        assert_eq!(big.width, base.width);
+        let (c, s) = (511.5, 16.0);
+        let cam = format!("{:?}", big.camera);
+        assert!(cam.contains(&format!("{:?}", c - 181.5 * s)), "{cam}");
     }
 
     #[test]
