@@ -166,6 +166,8 @@ pub struct PeerRow {
     /// POV-Ray: `max_gradient` written (grid units) and the data's bound.
     pub max_gradient: Option<f64>,
     pub gradient_estimate: Option<f64>,
+    /// POV-Ray: the `contained_by` box (grid coordinates).
+    pub contained_by: Option<[[usize; 3]; 2]>,
     /// POV-Ray warned that `max_gradient` was too low (it may leave holes).
     pub max_gradient_found: Option<f64>,
     /// How to reproduce one run.
@@ -541,6 +543,7 @@ fn snell_row(
         error,
         max_gradient: None,
         gradient_estimate: None,
+        contained_by: None,
         max_gradient_found: None,
         command: format!("snell {}", args.join(" ")),
     };
@@ -623,6 +626,7 @@ fn pov_row(
         error,
         max_gradient: Some(ex.max_gradient),
         gradient_estimate: Some(ex.gradient_estimate),
+        contained_by: Some(ex.contained_by),
         max_gradient_found: found,
         command: ex.command_line(Variant::Color, opts.threads),
     };
@@ -887,9 +891,13 @@ step `accuracy` (tricubic densities in single precision).\n\n\
             s,
             "\nPOV-Ray settings (`snell export-pov`, as issue 8 asks): `isosurface` over a 16-bit \
 `density_file df3` with `frequency 0`, `max_gradient` from the data ({}; grid units), \
-`max_trace 1` (the default), `contained_by` the volume's box, glass `interior {{ ior 1.5 }}`, \
+`max_trace 1` (the default), `contained_by` {}, glass `interior {{ ior 1.5 }}`, \
 `-A +Q9`, no lights. Command of one run: `{}`.",
             gradients.join(", "),
+            p.contained_by.map_or("the volume's box".to_string(), |[lo, hi]| format!(
+                "the box {lo:?}–{hi:?} (grid coordinates) of the cells whose conservative bound \
+reaches the iso-value"
+            )),
             p.command
         );
         let holes: Vec<String> = pov_rows
