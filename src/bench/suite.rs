@@ -650,7 +650,7 @@ fn scaling() -> Suite {
             let extra = scaled_sphere(n);
             let extra: Vec<&str> = extra.iter().map(|s| s.as_str()).collect();
             exp(
-                &SPHERE,
+                &SPHERE_F32,
                 &SIDE_512,
                 "bspline3",
                 "octree+bezier",
@@ -714,14 +714,10 @@ fn paper() -> Suite {
         description: "The paper's Tables 1–4 at 512×512 on the sphere, cranium, lobster and \
 teapot, with error columns, and anti-aliasing quality on the sphere, ball and teapot."
             .into(),
-        // Estimated from component timings on the 2-core machine: more than
-        // half is the dense-march ground truth of the 15 CT scene/filter pairs
-        // (step 0.02 through the whole bounding box: 5× the paper's step-0.1
-        // baseline, and 2–3× more again for bspline6).
-        // The anti-aliasing quality table adds about 10–15 minutes (its 16×16
-        // references took 44–135 s each at 512×512 on a quiet moment).
-        budget: "about 1.75 hours on 2 cores, over half of it the dense-march ground truth of \
-the CT scenes"
+        // Measured: 22 min 13 s for the whole suite on the 2-core machine
+        // (`snell bench --suite paper`, 2026-11-23, BENCHMARKS.md).
+        budget: "about 25 minutes on 2 cores (22 min measured), most of it the fixed-step \
+baselines and the dense-march ground truth of the CT scenes"
             .into(),
         tables: paper_tables(),
     }
@@ -811,7 +807,8 @@ expensive and real supersampling multiplies that cost.",
         description: "The paper suite plus every filter, octree leaf sizes, PRSS variants and \
 Table 1 at the paper's step 0.1."
             .into(),
-        budget: "about 2.25 hours on 2 cores".into(),
+        budget: "the paper suite's 25 minutes plus the extra tables, about 45 minutes on 2 cores"
+            .into(),
         tables,
     }
 }
@@ -935,6 +932,12 @@ mod tests {
             format!("{:?}", at64.backdrop)
         );
         assert_eq!(format!("{:?}", base.volume), format!("{:?}", at64.volume));
+        let scaling = Suite::by_name("scaling").unwrap();
+        assert!(
+            scaling
+                .experiments()
+                .all(|(_, e)| e.scene == "sphere-f32.toml")
+        );
         let big = load(&scaled_sphere(1024));
         assert_eq!(phantom_side(&scaled_sphere(1024)), Some(1024));
         assert_eq!(big.width, base.width);

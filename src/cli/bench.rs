@@ -11,8 +11,8 @@ use snell::bench::{self, DEFAULT_REPEATS, Observer, Options, Suite, peer};
 #[derive(ClapArgs, Debug)]
 pub struct Args {
     /// Suite: quick (under 3 minutes on 2 cores), paper (the paper's Tables 1-4
-    /// with error columns and anti-aliasing quality, about 1.75 hours), full
-    /// (paper plus filters, octree leaf sizes, PRSS variants, about 2.25 hours)
+    /// with error columns and anti-aliasing quality, about 25 minutes), full
+    /// (paper plus filters, octree leaf sizes, PRSS variants, about 45 minutes)
     /// or scaling (frame time against volume size 64³..1024³ and image size
     /// 128²..2048², with a plot; about 10 minutes and 16 GB).
     /// (default: quick, or none when --peer is given).
