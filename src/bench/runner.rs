@@ -473,8 +473,8 @@ not per configuration"
         table_wants_quality: bool,
     ) -> Result<ConfigResult, BenchError> {
         let scene = self.load(&e.scene, &e.overrides)?;
-        let wants_quality =
-            table_wants_quality || scene.render.supersampling != Supersampling::None;
+        let wants_quality = !e.skip_quality
+            && (table_wants_quality || scene.render.supersampling != Supersampling::None);
         // Ground truth first: neither its time nor its memory is the configuration's.
         let truth = self.truth(e, &scene)?;
         let quality_ref = if wants_quality {

@@ -110,6 +110,9 @@ pub struct Experiment {
     /// At most this many timed runs, whatever `--repeats` says: slow
     /// baselines (step traversal) would otherwise dominate the budget.
     pub max_repeats: Option<usize>,
+    /// No PSNR/SSIM even for an anti-aliased row: where only time matters
+    /// and the 16×16 reference would cost more than the rest (2048² frames).
+    pub skip_quality: bool,
 }
 
 impl Experiment {
@@ -313,6 +316,7 @@ fn exp(
         overrides,
         baseline: None,
         max_repeats: if trav == "step" { Some(1) } else { None },
+        skip_quality: false,
     }
 }
 
@@ -331,6 +335,10 @@ impl Experiment {
     }
     fn called(mut self, name: impl Into<String>) -> Experiment {
         self.name = name.into();
+        self
+    }
+    fn without_quality(mut self) -> Experiment {
+        self.skip_quality = true;
         self
     }
 }
@@ -660,6 +668,7 @@ fn scaling() -> Suite {
             .named(format!("{n}³"))
             .called(format!("{config}, sphere {n}³"))
             .vs("64³")
+            .without_quality()
         })
         .collect();
     let image: Vec<Experiment> = SCALING_IMAGES
@@ -671,6 +680,7 @@ fn scaling() -> Suite {
                 .named(format!("{w}×{w}"))
                 .called(format!("{config}, {w}×{w}"))
                 .vs("128×128")
+                .without_quality()
         })
         .collect();
     Suite {
