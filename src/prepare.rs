@@ -207,7 +207,19 @@ impl Cache {
         })
     }
 
-    fn volume_key(scene: &Scene) -> String {
+    /// Drops every volume (and the fields and acceleration structures built
+    /// from it) whose [`Cache::volume_key`] is not in `keep`: a run over many
+    /// volumes of one scene file (the scaling suite's 64³..1024³ phantoms)
+    /// then holds only the ones still to come, not all of them at once.
+    pub fn retain_volumes(&mut self, keep: &std::collections::HashSet<String>) {
+        self.volumes.retain(|k, _| keep.contains(k));
+        self.fields.retain(|(k, _), _| keep.contains(k));
+        self.accels.retain(|(k, ..), _| keep.contains(k));
+    }
+
+    /// Identity of a scene's volume: its file (canonical path, raw layout)
+    /// or phantom parameters, and its spacing.
+    pub fn volume_key(scene: &Scene) -> String {
         let src = match &scene.volume {
             VolumeSource::File {
                 path,
@@ -511,6 +523,14 @@ mod tests {
             a.accel.as_ref().unwrap(),
             c.accel.as_ref().unwrap()
         ));
+        // Keeping the volume keeps everything; dropping it rebuilds all.
+        let key = Cache::volume_key(&s1);
+        cache.retain_volumes(&[key].into_iter().collect());
+        let d = cache.prepare(&s2, &LoadOptions::default()).unwrap();
+        assert!(Arc::ptr_eq(&a.field, &d.field));
+        cache.retain_volumes(&Default::default());
+        let e = cache.prepare(&s2, &LoadOptions::default()).unwrap();
+        assert!(!Arc::ptr_eq(&a.field, &e.field) && e.times.prefilter_s > 0.0);
     }
 
     #[test]

@@ -234,10 +234,33 @@ impl<'a> Runner<'a> {
         let mut configs: Vec<Option<ConfigResult>> = vec![None; unique.len()];
         let mut classified: HashMap<(usize, usize), ClassifyResult> = HashMap::new();
         for scene in scenes {
+            // The volumes this scene's experiments and classify rows load, in
+            // run order: before each experiment, the cache keeps only those
+            // still to come (one 1024³ phantom's structures take 17 GB).
+            let mut upcoming: Vec<(usize, String)> = Vec::new();
+            for (i, (e, _)) in unique.iter().enumerate() {
+                if e.scene == scene {
+                    upcoming.push((i, volume_key(self.load(&e.scene, &e.overrides)?)));
+                }
+            }
+            for &(_, _, row, _) in &classify_rows {
+                if row.scene == scene {
+                    upcoming.push((
+                        usize::MAX,
+                        volume_key(self.load(&row.scene, &row.overrides)?),
+                    ));
+                }
+            }
             for (i, (e, table)) in unique.iter().enumerate() {
                 if e.scene != scene {
                     continue;
                 }
+                let keep: HashSet<String> = upcoming
+                    .iter()
+                    .filter(|(j, _)| *j >= i)
+                    .map(|(_, k)| k.clone())
+                    .collect();
+                self.cache(scene).retain_volumes(&keep);
                 let what = format!("{table}: {} ({})", e.name, e.scene_label);
                 self.observer.start(&what);
                 let c = self.experiment(e, wants_quality.contains(&e.key()))?;
@@ -675,6 +698,10 @@ fn summary_line(c: &ConfigResult) -> String {
         s.push_str(&format!(", PSNR {:.2} dB, SSIM {:.4}", q.psnr, q.ssim));
     }
     s
+}
+
+fn volume_key(scene: Scene) -> String {
+    Cache::volume_key(&scene)
 }
 
 #[cfg(test)]
