@@ -487,6 +487,18 @@ pub fn scaling_panels(r: &Report) -> Vec<Scaling> {
     out
 }
 
+/// A log-axis tick label only at 1, 2 and 5 times a power of ten: the sizes
+/// axis spans decades, and labelling every sub-tick (600 700 800 900 1000)
+/// makes the labels run into each other.
+fn sparse_tick(v: f64) -> String {
+    let m = v / 10f64.powf(v.log10().floor());
+    if [1.0, 2.0, 5.0].iter().any(|k| (m - k).abs() < 1e-6) {
+        fmt_tick(v)
+    } else {
+        String::new()
+    }
+}
+
 fn draw_scaling<DB: DrawingBackend>(
     area: &DrawingArea<DB, Shift>,
     title: &str,
@@ -498,6 +510,12 @@ fn draw_scaling<DB: DrawingBackend>(
     for (panel, cell) in panels.iter().zip(&cells) {
         let (x0, x1) = log_range(panel.points.iter().map(|p| p.0));
         let (y0, y1) = log_range(panel.points.iter().map(|p| p.1));
+        // Out to whole decades: a range inside one decade gets no labelled
+        // tick on a log axis.
+        let (y0, y1) = (
+            y0.min(10f64.powf(y0.log10().floor())),
+            y1.max(10f64.powf(y1.log10().ceil())),
+        );
         let mut chart = ChartBuilder::on(cell)
             .caption(&panel.title, (FAMILY, 15))
             .margin(20)
@@ -511,7 +529,7 @@ fn draw_scaling<DB: DrawingBackend>(
             .y_desc("median frame time (ms)")
             .label_style((FAMILY, 14))
             .axis_desc_style((FAMILY, 15))
-            .x_label_formatter(&|v| fmt_tick(*v))
+            .x_label_formatter(&|v| sparse_tick(*v))
             .y_label_formatter(&|v| fmt_tick(*v))
             .light_line_style(BLACK.mix(0.04))
             .bold_line_style(BLACK.mix(0.12))
@@ -723,6 +741,9 @@ mod tests {
         assert_eq!(written.len(), 6);
         let svg = std::fs::read_to_string(dir.join("scaling.svg")).unwrap();
         assert!(svg.contains("voxel count") && svg.contains("measured"));
+        assert_eq!(sparse_tick(700.0), "");
+        assert_eq!(sparse_tick(200.0), fmt_tick(200.0));
+        assert_eq!(sparse_tick(1000.0), fmt_tick(1000.0));
         let _ = std::fs::remove_dir_all(&dir);
     }
 
