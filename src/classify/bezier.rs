@@ -61,29 +61,13 @@ pub fn cell_bernstein(field: &Field, cell: [i64; 3], iso: f64, beta: &[f64]) -> 
     })
 }
 
-/// de Casteljau split at 1/2 along `axis`.
+/// de Casteljau split at 1/2 along `axis` (the sub-cell masks' halving, for
+/// a patch of runtime support `s`).
 fn split(b: &[f64], s: usize, axis: usize) -> (Vec<f64>, Vec<f64>) {
     let stride = [1, s, s * s][axis];
     let mut left = vec![0.0; b.len()];
     let mut right = vec![0.0; b.len()];
-    let mut work = vec![0.0; s];
-    for base in 0..b.len() {
-        if !(base / stride).is_multiple_of(s) {
-            continue;
-        }
-        for (i, w) in work.iter_mut().enumerate() {
-            *w = b[base + i * stride];
-        }
-        left[base] = work[0];
-        right[base + (s - 1) * stride] = work[s - 1];
-        for r in 1..s {
-            for i in 0..s - r {
-                work[i] = 0.5 * (work[i] + work[i + 1]);
-            }
-            left[base + r * stride] = work[0];
-            right[base + (s - 1 - r) * stride] = work[s - 1 - r];
-        }
-    }
+    crate::with_support!(s, S => halve_into::<S>(b, stride, &mut left, &mut right));
     (left, right)
 }
 

@@ -10,7 +10,7 @@ use std::path::{Path, PathBuf};
 
 use exr::prelude::read_first_flat_layer_from_file;
 
-use super::{FilmError, Placement, write_exr_placed, write_png_rgb};
+use super::{FilmError, Placement, to_u8, write_exr_placed, write_png_rgb};
 
 /// One part as read: where it sits and its channels (sorted by name).
 #[derive(Clone, Debug)]
@@ -231,7 +231,6 @@ impl Merged {
         let n = self.width as usize * self.height as usize;
         let zeros = vec![0.0f32; n];
         let [r, g, b] = ["R", "G", "B"].map(|c| self.channel(c).unwrap_or(&zeros));
-        let to_u8 = |v: f32| (v.clamp(0.0, 1.0) * 255.0).round() as u8;
         let bytes: Vec<u8> = (0..n)
             .flat_map(|i| [to_u8(r[i]), to_u8(g[i]), to_u8(b[i])])
             .collect();

@@ -264,7 +264,8 @@ impl HitImage {
     }
 }
 
-fn to_u8(v: f32) -> u8 {
+/// A colour value to 8 bits (clamped to [0, 1], rounded).
+pub(crate) fn to_u8(v: f32) -> u8 {
     (v.clamp(0.0, 1.0) * 255.0).round() as u8
 }
 

@@ -322,6 +322,16 @@ fn in_range(ctx: &Ctx, c: [i64; 3]) -> bool {
     (c[0] as u64) < n[0] as u64 && (c[1] as u64) < n[1] as u64 && (c[2] as u64) < n[2] as u64
 }
 
+/// Ray `i` in cell coordinates, from the packet's SoA columns.
+#[inline(always)]
+fn cell_ray(rays: &Rays, i: usize) -> CellRay {
+    CellRay {
+        ou: std::array::from_fn(|a| rays.cell_org[a][i]),
+        du: std::array::from_fn(|a| rays.cell_dir[a][i]),
+        inv: std::array::from_fn(|a| rays.cell_inv[a][i]),
+    }
+}
+
 /// Cell walk for `dda`, `octree` and `distance`: single cells step by the
 /// incremental DDA, skipped blocks and cubes by [`exit_box`].
 fn walk(
@@ -333,11 +343,7 @@ fn walk(
     c: &mut Counters,
 ) {
     let i = r as usize;
-    let ray = CellRay {
-        ou: std::array::from_fn(|a| rays.cell_org[a][i]),
-        du: std::array::from_fn(|a| rays.cell_dir[a][i]),
-        inv: std::array::from_fn(|a| rays.cell_inv[a][i]),
-    };
+    let ray = cell_ray(rays, i);
     let mut w = Dda::new(&ray, rays.cell_of(i), rays.t[i]);
     let t_end = rays.t_end[i];
     if rays.advance[i] {
@@ -438,11 +444,7 @@ fn walk_octree(
     c: &mut Counters,
 ) {
     let i = r as usize;
-    let ray = CellRay {
-        ou: std::array::from_fn(|a| rays.cell_org[a][i]),
-        du: std::array::from_fn(|a| rays.cell_dir[a][i]),
-        inv: std::array::from_fn(|a| rays.cell_inv[a][i]),
-    };
+    let ray = cell_ray(rays, i);
     let (t_start, t_end) = (rays.t_start[i], rays.t_end[i]);
     let mut cell = rays.cell_of(i);
     let mut t = rays.t[i];
