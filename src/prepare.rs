@@ -18,9 +18,8 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use crate::classify::{self, Method, Tags};
+use crate::classify::{self, Method, SubCellMasks, Tags};
 use crate::filter::coeffs::Coeffs;
-use crate::filter::patch::Patches;
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
@@ -36,12 +35,12 @@ pub struct Accel {
     pub iso: f64,
     pub octree: Octree,
     proximity: OnceLock<Proximity>,
-    patches: OnceLock<Option<Patches>>,
+    masks: OnceLock<Option<SubCellMasks>>,
 }
 
-/// Largest memory the per-cell patches may take (they are an optimisation:
-/// without them the solve stage restricts from the coefficients directly).
-pub const PATCH_BUDGET: usize = 2 << 30;
+/// Largest memory the sub-cell masks may take (they are an optimisation:
+/// without them every tagged cell's segment is solved).
+pub const MASK_BUDGET: usize = 2 << 30;
 
 impl Accel {
     /// The distance field, built on first use; returns it and its build time
@@ -68,27 +67,22 @@ impl Accel {
         self.proximity.get()
     }
 
-    /// Power-basis patches of the tagged cells, built on first use when they
-    /// fit [`PATCH_BUDGET`]; returns them (or `None`) and the build time.
-    pub fn patches(&self, field: &Field) -> (Option<&Patches>, f64) {
+    /// Sub-cell masks of the tagged cells, built on first use for the
+    /// Bézier classification when they fit [`MASK_BUDGET`] (the paper's BMCC
+    /// and ACCC are measured at their own resolution); returns them (or
+    /// `None`) and the build time.
+    pub fn masks(&self, field: &Field) -> (Option<&SubCellMasks>, f64) {
         let start = Instant::now();
         let mut built = false;
-        let p = self.patches.get_or_init(|| {
+        let m = self.masks.get_or_init(|| {
             built = true;
             let tags = self.octree.tags();
-            // SNELL_NO_PATCHES=1 restricts from the coefficients (comparisons).
-            let disabled = std::env::var_os("SNELL_NO_PATCHES").is_some();
-            (!disabled && Patches::bytes_for(tags, field.kernel().support()) <= PATCH_BUDGET).then(
-                || {
-                    // Sub-cell masks refine the Bézier hull only: the paper's
-                    // BMCC and ACCC are measured at their own resolution.
-                    let sub_cells = matches!(self.method, Method::Bezier(_));
-                    Patches::build(field, tags, field.separating_iso(self.iso), sub_cells)
-                },
-            )
+            (matches!(self.method, Method::Bezier(_))
+                && SubCellMasks::bytes_for(tags) <= MASK_BUDGET)
+                .then(|| SubCellMasks::build(field, tags, field.separating_iso(self.iso)))
         });
         (
-            p.as_ref(),
+            m.as_ref(),
             if built {
                 start.elapsed().as_secs_f64()
             } else {
@@ -97,9 +91,9 @@ impl Accel {
         )
     }
 
-    /// The patches if they were built (and fit the budget).
-    pub fn patches_if_built(&self) -> Option<&Patches> {
-        self.patches.get().and_then(|p| p.as_ref())
+    /// The masks if they were built (and fit the budget).
+    pub fn masks_if_built(&self) -> Option<&SubCellMasks> {
+        self.masks.get().and_then(|m| m.as_ref())
     }
 }
 
@@ -144,7 +138,7 @@ impl Prepared {
             self.times.octree_s += a.proximity().1;
         }
         if traversal != Traversal::Step {
-            self.times.octree_s += a.patches(&self.field).1;
+            self.times.octree_s += a.masks(&self.field).1;
         }
     }
 
@@ -175,7 +169,7 @@ fn build_accel(field: &Field, iso: f64, method: Method, tags: Option<Tags>) -> (
             iso,
             octree,
             proximity: OnceLock::new(),
-            patches: OnceLock::new(),
+            masks: OnceLock::new(),
         },
         classify_s,
         start.elapsed().as_secs_f64(),

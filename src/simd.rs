@@ -203,6 +203,60 @@ pub unsafe fn cubic_value_grad(
     )
 }
 
+/// `[data[base[l] + off] for each lane l]`: one hardware gather for 8 lanes
+/// (AVX-512) or 4 (AVX2), scalar loads otherwise.
+///
+/// # Safety
+/// Every `base[l] + off` must be in bounds of `data`, and `L` must match the
+/// running instruction set as [`with_isa!`] binds it (8 only under
+/// [`Isa::Avx512`], 4 only under [`Isa::Avx2`] or better).
+#[inline(always)]
+pub unsafe fn gather<const L: usize>(data: &[f64], base: &[usize; L], off: usize) -> [f64; L] {
+    debug_assert!(base.iter().all(|&b| b + off < data.len()));
+    #[cfg(target_arch = "x86_64")]
+    {
+        let ptr = data.as_ptr().wrapping_add(off);
+        if L == 8 {
+            // SAFETY: L == 8 runs only under Isa::Avx512; indices in bounds.
+            let v = unsafe { gather8(ptr, base.as_ptr()) };
+            // SAFETY: L == 8, so [f64; 8] and [f64; L] are the same type.
+            return unsafe { std::mem::transmute_copy(&v) };
+        }
+        if L == 4 {
+            // SAFETY: L == 4 runs only under Isa::Avx2 or better.
+            let v = unsafe { gather4(ptr, base.as_ptr()) };
+            // SAFETY: as above, with 4.
+            return unsafe { std::mem::transmute_copy(&v) };
+        }
+    }
+    // SAFETY: the caller guarantees the indices are in bounds.
+    std::array::from_fn(|l| unsafe { *data.get_unchecked(base[l] + off) })
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+unsafe fn gather8(ptr: *const f64, idx: *const usize) -> [f64; 8] {
+    use std::arch::x86_64::*;
+    // SAFETY: 8 indices at `idx`; each `ptr + idx[l]` in bounds (caller).
+    unsafe {
+        let i = _mm512_loadu_si512(idx as *const __m512i);
+        std::mem::transmute(_mm512_i64gather_pd::<8>(i, ptr))
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn gather4(ptr: *const f64, idx: *const usize) -> [f64; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: 4 indices at `idx`; each `ptr + idx[l]` in bounds (caller).
+    unsafe {
+        let i = _mm256_loadu_si256(idx as *const __m256i);
+        std::mem::transmute(_mm256_i64gather_pd::<8>(ptr, i))
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

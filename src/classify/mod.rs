@@ -19,6 +19,7 @@
 
 pub mod bezier;
 pub mod bound;
+pub mod masks;
 mod separable;
 pub mod tags;
 
@@ -27,6 +28,7 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 pub use bound::CellBound;
+pub use masks::SubCellMasks;
 pub use tags::Tags;
 
 use crate::filter::Field;

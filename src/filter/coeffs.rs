@@ -40,6 +40,18 @@ pub trait Coefficient:
     /// The slice itself when the storage is already `f64` (vector kernels
     /// load it directly), else `None`.
     fn as_f64_slice(s: &[Self]) -> Option<&[f64]>;
+
+    /// `s[base[l] + off]` as `f64` for each of `L` lanes (one hardware
+    /// gather where the storage and instruction set allow).
+    ///
+    /// # Safety
+    /// As [`crate::simd::gather`]: indices in bounds, `L` bound by
+    /// [`crate::with_isa!`].
+    #[inline(always)]
+    unsafe fn gather<const L: usize>(s: &[Self], base: &[usize; L], off: usize) -> [f64; L] {
+        // SAFETY: the caller guarantees the indices are in bounds.
+        std::array::from_fn(|l| unsafe { s.get_unchecked(base[l] + off) }.to_f64())
+    }
 }
 
 impl Coefficient for f64 {
@@ -55,6 +67,11 @@ impl Coefficient for f64 {
     #[inline(always)]
     fn as_f64_slice(s: &[Self]) -> Option<&[f64]> {
         Some(s)
+    }
+    #[inline(always)]
+    unsafe fn gather<const L: usize>(s: &[Self], base: &[usize; L], off: usize) -> [f64; L] {
+        // SAFETY: forwarded from the caller.
+        unsafe { crate::simd::gather(s, base, off) }
     }
 }
 

@@ -13,7 +13,6 @@
 pub mod coeffs;
 pub mod field;
 pub mod kernel;
-pub mod patch;
 pub mod prefilter;
 pub mod restrict;
 

@@ -193,10 +193,9 @@ impl<T: Coefficient> Field<T> {
                 let mut ajk = [[0.0f64; L]; S];
                 for i in 0..S {
                     let off = j * sy + k * sz + i;
-                    // SAFETY: base + off < base + span <= data.len() (asserted above).
-                    let c: [f64; L] = std::array::from_fn(|l| {
-                        unsafe { data.get_unchecked(seg.base[l] + off) }.to_f64()
-                    });
+                    // SAFETY: base + off < base + span <= data.len() (asserted
+                    // above); L is bound by `with_isa!`.
+                    let c: [f64; L] = unsafe { T::gather(data, &seg.base, off) };
                     let wx = &w[0][i];
                     for m in 0..S {
                         for l in 0..L {

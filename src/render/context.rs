@@ -3,9 +3,8 @@
 
 use glam::DVec3;
 
-use crate::classify::CellBound;
+use crate::classify::{CellBound, SubCellMasks};
 use crate::filter::Field;
-use crate::filter::patch::Patches;
 use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
 use crate::prepare::Prepared;
@@ -42,8 +41,8 @@ pub struct Ctx<'a> {
     pub active: [DVec3; 2],
     pub basis: BernsteinBasis,
     pub skip: Skip<'a>,
-    /// Per-cell power-basis patches of the tagged cells, when prepared.
-    pub patches: Option<&'a Patches>,
+    /// Sub-cell masks of the tagged cells (Bézier classification).
+    pub masks: Option<&'a SubCellMasks>,
     pub settings: RenderSettings,
     /// Indices of refraction inside and outside the object.
     pub ior_inside: f64,
@@ -98,7 +97,7 @@ impl<'a> Ctx<'a> {
                 _ => Skip::Bound(CellBound::new(kernel)),
             },
             // Built on demand if `Prepared::ready_for` did not (then untimed).
-            patches: prep.accel.as_ref().and_then(|a| a.patches(field).0),
+            masks: prep.accel.as_ref().and_then(|a| a.masks(field).0),
             settings: scene.render,
             ior_inside: scene.surface.ior,
             ior_outside: scene.surface.outside_ior,

@@ -417,13 +417,11 @@ fn tagged_segment(
     let (c0, c1) = cell_span(ray, cell);
     let t0 = fmax(c0, t_start);
     let t1 = fmax(fmin(c1, t_end), t0);
-    match ctx.patches.and_then(|p| Some((p, p.slot(cell)?))) {
+    match ctx.masks.and_then(|m| m.get(cell)) {
         // The mask only decides whether to solve: the solve itself gets the
         // whole segment, so its polynomial (and every root, tangential touch
         // and tolerance decision) is the same bits with or without masks.
-        Some((p, slot)) => {
-            meets_tagged_sub_cell(ray, cell, t0, t1, p.mask(slot)).then_some((t0, t1))
-        }
+        Some(mask) => meets_tagged_sub_cell(ray, cell, t0, t1, mask).then_some((t0, t1)),
         None => Some((t0, t1)),
     }
 }
