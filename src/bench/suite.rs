@@ -762,14 +762,14 @@ fn full() -> Suite {
                 &[&leaf],
             )
             .named(format!("leaf {l}"))
-            .vs("leaf 4")
+            .vs("leaf 1")
         })
         .collect();
     tables.push(render_table(
         "leaf",
         "Octree leaf size (sphere, bspline3, octree+bezier)",
-        "Octree leaves of 1–8 cells: smaller leaves skip more empty space, larger ones \
-descend less.",
+        "Octree leaves of 1–8 cells: smaller leaves skip more empty space; a step costs \
+the same at any level (one byte of the flattened skip map).",
         Comparison::Ratio,
         false,
         leaves,

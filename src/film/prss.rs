@@ -43,7 +43,7 @@
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::filter::kernel::floor_i64;
+use crate::filter::kernel::floor_fast;
 use crate::scene::{Backdrop, FootprintFilter, Pattern, PrssFallback, PrssMap, RenderSettings};
 
 use super::Film;
@@ -595,7 +595,7 @@ fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
         }
         PrssMap::Bicubic => return bicubic_in_one_square(g, size),
     }
-    let square = |h: [f64; 2]| (floor_i64(h[0] / size), floor_i64(h[1] / size));
+    let square = |h: [f64; 2]| (floor_fast(h[0] / size), floor_fast(h[1] / size));
     let first = square(e[1][1]);
     e.iter().flatten().all(|&h| square(h) == first)
 }
@@ -625,7 +625,7 @@ fn bicubic_in_one_square(g: &Grid, size: f64) -> bool {
             for k in 0..2 {
                 // Widened a little more for the rounding of the sums.
                 let m = NEG * (hi[k] - lo[k]) + 1e-9 * (lo[k].abs() + hi[k].abs() + size);
-                if floor_i64((lo[k] - m) * inv) != floor_i64((hi[k] + m) * inv) {
+                if floor_fast((lo[k] - m) * inv) != floor_fast((hi[k] + m) * inv) {
                     return false;
                 }
             }
@@ -717,7 +717,7 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
 /// floors and a parity instead of two divisions and a colour lookup, and
 /// only the odd squares are counted (two colours: the mean is a mix).
 fn checker_average(g: &Grid, taps: &Taps, size: f64, colors: &[[f32; 3]; 2]) -> [f32; 3] {
-    use crate::filter::kernel::floor_i64;
+    use crate::filter::kernel::floor_fast;
     let inv = 1.0 / size;
     let gs: Grid = g.map(|row| row.map(|p| [p[0] * inv, p[1] * inv]));
     let n = taps.t.len();
@@ -726,7 +726,7 @@ fn checker_average(g: &Grid, taps: &Taps, size: f64, colors: &[[f32; 3]; 2]) -> 
         let r = rows(&gs, &taps.w[jy]);
         for ix in 0..n {
             let h = cols(&r, &taps.w[ix]);
-            odd += (floor_i64(h[0]).wrapping_add(floor_i64(h[1])) & 1) as usize;
+            odd += (floor_fast(h[0]).wrapping_add(floor_fast(h[1])) & 1) as usize;
         }
     }
     let even = n * n - odd;

@@ -230,6 +230,25 @@ pub fn floor_i64(x: f64) -> i64 {
     i - ((i as f64) > x) as i64
 }
 
+/// [`floor_i64`] without the saturation checks Rust's `as` adds (a NaN test
+/// and two range compares): one truncating conversion and a compare, for the
+/// traversal's steps and the checkerboard parities. Exact for finite `|x| <
+/// 2^63`; NaN and anything larger give `i64::MIN` (x86's "integer
+/// indefinite"; [`floor_i64`]'s saturation elsewhere), never undefined
+/// behaviour.
+#[inline(always)]
+pub fn floor_fast(x: f64) -> i64 {
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_cvttsd_si64, _mm_set_sd};
+        // SAFETY: SSE2 is part of the x86-64 baseline.
+        let i = unsafe { _mm_cvttsd_si64(_mm_set_sd(x)) };
+        i - ((i as f64) > x) as i64
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    floor_i64(x)
+}
+
 /// Evaluates `Σ p[m] t^m`.
 #[inline(always)]
 pub fn horner(p: &[f64], t: f64) -> f64 {

@@ -91,9 +91,9 @@ impl Backdrop {
     pub fn color(&self, u: f64, v: f64) -> [f32; 3] {
         match &self.pattern {
             Pattern::Checker { size, colors } => {
-                use crate::filter::kernel::floor_i64;
+                use crate::filter::kernel::floor_fast;
                 // Integer parity: no libm floor or fmod in the hottest lookup.
-                let parity = floor_i64(u / size).wrapping_add(floor_i64(v / size)) & 1;
+                let parity = floor_fast(u / size).wrapping_add(floor_fast(v / size)) & 1;
                 if parity == 0 { colors[0] } else { colors[1] }
             }
             Pattern::Image(tex) => tex.sample(u, v),

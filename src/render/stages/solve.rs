@@ -92,7 +92,8 @@ fn solve_cells<const S: usize, const L: usize, M: Madd>(
             span[l] = (t0, t1, dg.length() * (t1 - t0));
         }
         let mut mono = [[0.0; L]; MAX_DEGREE + 1];
-        ctx.field.restrict_lanes::<S, L, M>(&seg, ctx.iso, &mut mono);
+        ctx.field
+            .restrict_lanes::<S, L, M>(&seg, ctx.iso, &mut mono);
         let bern = ctx.basis.bernstein_lanes::<L, M>(&mono);
         for (l, &r) in group.iter().enumerate() {
             let i = r as usize;

@@ -11,7 +11,7 @@ use super::super::context::{Ctx, Skip};
 use super::super::packet::{Fate, Queue, Rays};
 use super::field_minus_iso;
 use crate::classify::bezier::SUB;
-use crate::filter::kernel::floor_i64;
+use crate::filter::kernel::floor_fast;
 use crate::octree::TAGGED;
 use crate::render::stats::Counters;
 use crate::roots::inside;
@@ -142,7 +142,7 @@ pub fn meets_tagged_sub_cell(ray: &CellRay, cell: [i64; 3], t0: f64, t1: f64, ma
     }
     let n = SUB as f64;
     let local = |a: usize, t: f64| n * (ray.ou[a] + t * ray.du[a] - cell[a] as f64);
-    let index = |v: f64| (floor_i64(v).clamp(0, SUB as i64 - 1)) as usize;
+    let index = |v: f64| (floor_fast(v).clamp(0, SUB as i64 - 1)) as usize;
     let mut bbox = u64::MAX;
     for a in 0..3 {
         let (v0, v1) = (local(a, t0), local(a, t1));
@@ -236,10 +236,10 @@ pub fn exit_box(
     let next = std::array::from_fn(|a| {
         let (past, inside) = if du[a] > 0.0 {
             // Inside [cell, hi]: clamped into the box, never backwards.
-            let at = floor_i64(ou[a] + t_new * du[a]);
+            let at = floor_fast(ou[a] + t_new * du[a]);
             (hi[a] + 1, at.min(hi[a]).max(cell[a]))
         } else if du[a] < 0.0 {
-            let at = floor_i64(ou[a] + t_new * du[a]);
+            let at = floor_fast(ou[a] + t_new * du[a]);
             (lo[a] - 1, at.max(lo[a]).min(cell[a]))
         } else {
             (cell[a], cell[a])
