@@ -171,19 +171,17 @@ impl SegmentPoly {
     /// machine precision whatever path Brent took to it, so two ways of
     /// computing the same polynomial agree on the root.
     fn polish(&self, mut x: f64, lo: f64, hi: f64) -> f64 {
-        let (mut g, _) = self.eval_deriv(x);
+        let (mut g, mut d) = self.eval_deriv(x);
         for _ in 0..4 {
-            let (_, d) = self.eval_deriv(x);
             if d == 0.0 || g == 0.0 {
                 break;
             }
             let next = (x - g / d).clamp(lo, hi);
-            let (gn, _) = self.eval_deriv(next);
+            let (gn, dn) = self.eval_deriv(next);
             if gn.abs() >= g.abs() {
                 break;
             }
-            x = next;
-            g = gn;
+            (x, g, d) = (next, gn, dn);
         }
         x
     }
