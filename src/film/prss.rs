@@ -170,14 +170,29 @@ pub(crate) fn map_weights(map: PrssMap, t: f64) -> [f64; 5] {
 struct Taps {
     t: Vec<f64>,
     w: Vec<[f64; 5]>,
+    /// `w` transposed into chunks of [`CHUNK`] sub-points (`w_chunks[c][i][k]`
+    /// is weight `i` of sub-point `c·CHUNK + k`; zero past the last), for the
+    /// vectorised checkerboard count.
+    w_chunks: Vec<[[f64; CHUNK]; 5]>,
     side: Vec<i64>,
 }
+
+/// Sub-points per vector chunk of [`checker_average`].
+const CHUNK: usize = 8;
 
 impl Taps {
     fn new(n: usize, map: PrssMap) -> Taps {
         let t: Vec<f64> = (0..n).map(|i| (i as f64 + 0.5) / n as f64 - 0.5).collect();
+        let w: Vec<[f64; 5]> = t.iter().map(|&t| map_weights(map, t)).collect();
+        let w_chunks = w
+            .chunks(CHUNK)
+            .map(|c| {
+                std::array::from_fn(|i| std::array::from_fn(|k| c.get(k).map_or(0.0, |w| w[i])))
+            })
+            .collect();
         Taps {
-            w: t.iter().map(|&t| map_weights(map, t)).collect(),
+            w,
+            w_chunks,
             side: t.iter().map(|&t| if t < 0.0 { -1 } else { 1 }).collect(),
             t,
         }
@@ -716,24 +731,70 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
 /// the map is scaled to square units once, so each sub-point costs two
 /// floors and a parity instead of two divisions and a colour lookup, and
 /// only the odd squares are counted (two colours: the mean is a mix).
+///
+/// With SIMD (AVX2 or AVX-512) a row's sub-points go [`CHUNK`] at a time:
+/// the columns combine as vectors, the floors are rounding instructions and
+/// the parity is `s - 2⌊s/2⌋` on the float sum — the same count as the
+/// integer parity for every input (NaN and |h| ≥ 2⁶³ count as even in both).
 fn checker_average(g: &Grid, taps: &Taps, size: f64, colors: &[[f32; 3]; 2]) -> [f32; 3] {
-    use crate::filter::kernel::floor_fast;
     let inv = 1.0 / size;
     let gs: Grid = g.map(|row| row.map(|p| [p[0] * inv, p[1] * inv]));
     let n = taps.t.len();
-    let mut odd = 0usize;
-    for jy in 0..n {
-        let r = rows(&gs, &taps.w[jy]);
-        for ix in 0..n {
-            let h = cols(&r, &taps.w[ix]);
-            odd += (floor_fast(h[0]).wrapping_add(floor_fast(h[1])) & 1) as usize;
-        }
-    }
+    let isa = crate::simd::Isa::current();
+    let odd = crate::with_isa!(isa, L, _M => if L >= 4 {
+        odd_count_chunked(&gs, taps)
+    } else {
+        odd_count(&gs, taps)
+    });
     let even = n * n - odd;
     std::array::from_fn(|k| {
         ((colors[0][k] as f64 * even as f64 + colors[1][k] as f64 * odd as f64) / (n * n) as f64)
             as f32
     })
+}
+
+/// Sub-points of `taps` on odd squares of the unit checkerboard, one at a
+/// time with integer floors (no rounding instruction on the x86-64 baseline).
+fn odd_count(gs: &Grid, taps: &Taps) -> usize {
+    let n = taps.t.len();
+    let mut odd = 0usize;
+    for jy in 0..n {
+        let r = rows(gs, &taps.w[jy]);
+        for ix in 0..n {
+            let h = cols(&r, &taps.w[ix]);
+            odd += (floor_fast(h[0]).wrapping_add(floor_fast(h[1])) & 1) as usize;
+        }
+    }
+    odd
+}
+
+/// [`odd_count`] a chunk of sub-points at a time, as vectors; only inside a
+/// function compiled with a rounding instruction (see [`checker_average`]).
+#[inline(always)]
+fn odd_count_chunked(gs: &Grid, taps: &Taps) -> usize {
+    let n = taps.t.len();
+    let mut odd = 0usize;
+    for jy in 0..n {
+        let r = rows(gs, &taps.w[jy]);
+        for (c, wc) in taps.w_chunks.iter().enumerate() {
+            let (mut hx, mut hy) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
+            for i in 0..5 {
+                for k in 0..CHUNK {
+                    hx[k] += wc[i][k] * r[i][0];
+                    hy[k] += wc[i][k] * r[i][1];
+                }
+            }
+            let live = (n - c * CHUNK).min(CHUNK);
+            let mut count = 0u32;
+            for k in 0..CHUNK {
+                let s = hx[k].floor() + hy[k].floor();
+                let is_odd = s - 2.0 * (0.5 * s).floor() == 1.0;
+                count += (is_odd && k < live) as u32;
+            }
+            odd += count as usize;
+        }
+    }
+    odd
 }
 
 /// Footprint colour of one pixel, or `None` to re-trace it.
