@@ -227,13 +227,13 @@ impl Kernel {
 #[inline(always)]
 pub fn floor_i64(x: f64) -> i64 {
     let i = x as i64;
-    i - ((i as f64) > x) as i64
+    i.saturating_sub(((i as f64) > x) as i64)
 }
 
 /// [`floor_i64`] without the saturation checks Rust's `as` adds (a NaN test
 /// and two range compares): one truncating conversion and a compare, for the
 /// traversal's steps and the checkerboard parities. Exact for finite `|x| <
-/// 2^63`; NaN and anything larger give `i64::MIN` (x86's "integer
+/// 2^63`; NaN and anything larger give `i64::MIN` on x86-64 (its "integer
 /// indefinite"; [`floor_i64`]'s saturation elsewhere), never undefined
 /// behaviour.
 #[inline(always)]
@@ -243,7 +243,7 @@ pub fn floor_fast(x: f64) -> i64 {
         use std::arch::x86_64::{_mm_cvttsd_si64, _mm_set_sd};
         // SAFETY: SSE2 is part of the x86-64 baseline.
         let i = unsafe { _mm_cvttsd_si64(_mm_set_sd(x)) };
-        i - ((i as f64) > x) as i64
+        i.saturating_sub(((i as f64) > x) as i64)
     }
     #[cfg(not(target_arch = "x86_64"))]
     floor_i64(x)
@@ -275,6 +275,43 @@ pub fn binomial(n: usize, k: usize) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn floors_match_libm_and_stay_defined_out_of_range() {
+        for x in [
+            0.0,
+            -0.0,
+            0.5,
+            -0.5,
+            1.0,
+            -1.0,
+            2.75,
+            -2.75,
+            1e15 + 0.5,
+            -9.3e15,
+            4.2e18,
+        ] {
+            assert_eq!(floor_i64(x), x.floor() as i64, "{x}");
+            assert_eq!(floor_fast(x), x.floor() as i64, "{x}");
+        }
+        // Saturating, and never an overflow (a debug-build panic before).
+        assert_eq!(floor_i64(-1e300), i64::MIN);
+        assert_eq!(floor_i64(f64::NEG_INFINITY), i64::MIN);
+        assert_eq!(floor_i64(1e300), i64::MAX);
+        assert_eq!(floor_i64(f64::NAN), 0);
+        if cfg!(target_arch = "x86_64") {
+            for x in [
+                f64::NAN,
+                1e300,
+                -1e300,
+                f64::INFINITY,
+                f64::NEG_INFINITY,
+                9.3e18,
+            ] {
+                assert_eq!(floor_fast(x), i64::MIN, "{x}");
+            }
+        }
+    }
 
     fn cox_de_boor(n: usize, x: f64) -> f64 {
         // Centred B-spline by the recurrence β^n(x) = ((n+1)/2 + x) β^{n-1}(x+1/2)
