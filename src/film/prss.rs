@@ -789,7 +789,7 @@ fn odd_count_chunked(gs: &Grid, taps: &Taps) -> usize {
             // even); NaN and |v| ≥ 2⁶³ count as even, as i64::MIN does.
             let parity = |v: f64| {
                 let f = v.floor();
-                if f.abs() < 9.223_372_036_854_775_808e18 {
+                if f.abs() < 9.223_372_036_854_776e18 {
                     f - 2.0 * (0.5 * f).floor()
                 } else {
                     0.0
