@@ -90,11 +90,6 @@ impl Accel {
             },
         )
     }
-
-    /// The masks if they were built (and fit the budget).
-    pub fn masks_if_built(&self) -> Option<&SubCellMasks> {
-        self.masks.get().and_then(|m| m.as_ref())
-    }
 }
 
 /// Inputs of one frame.

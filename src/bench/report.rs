@@ -168,7 +168,7 @@ pub fn markdown_tables(r: &Report, level: usize) -> String {
         let _ = write!(
             s,
             "{h} Preparation\n\nBuilt once per scene and reused by every later configuration that \
-needs it (wall ms; `octree` includes what is built with it, such as per-cell patches).\n\n"
+needs it (wall ms; `octree` includes what is built with it, such as the sub-cell masks).\n\n"
         );
         s.push_str(&table_head(
             &[
