@@ -231,11 +231,11 @@ pub fn floor_i64(x: f64) -> i64 {
 }
 
 /// [`floor_i64`] without the saturation checks Rust's `as` adds (a NaN test
-/// and two range compares): one truncating conversion and a compare, for the
-/// traversal's steps and the checkerboard parities. Exact for finite `|x| <
-/// 2^63`; NaN and anything larger give `i64::MIN` on x86-64 (its "integer
-/// indefinite"; [`floor_i64`]'s saturation elsewhere), never undefined
-/// behaviour.
+/// and two range compares): one truncating conversion, a compare and a
+/// saturating subtract, for the traversal's steps and the checkerboard
+/// parities. Exact for finite `|x| < 2^63`; NaN and anything larger give
+/// `i64::MIN` on x86-64 (its "integer indefinite"; [`floor_i64`]'s
+/// saturation elsewhere), never undefined behaviour.
 #[inline(always)]
 pub fn floor_fast(x: f64) -> i64 {
     #[cfg(target_arch = "x86_64")]

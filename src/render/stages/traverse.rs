@@ -330,8 +330,10 @@ fn cell_ray(rays: &Rays, i: usize) -> CellRay {
     }
 }
 
-/// Cell walk for `dda`, `octree` and `distance`: single cells step by the
-/// incremental DDA, skipped blocks and cubes by [`exit_box`].
+/// Cell walk over the bound alone (no classification) and over the distance
+/// field: single cells step by the incremental DDA, skipped cubes by
+/// [`exit_box`]. Octree tags (`dda` and `octree` with a classification) go
+/// through [`walk_octree`].
 fn walk(
     ctx: &Ctx,
     rays: &mut Rays,
@@ -358,11 +360,7 @@ fn walk(
         let cell = w.cell;
         let skip = match &ctx.skip {
             Skip::Bound(b) => (!b.may_cross(ctx.field, cell, ctx.iso)).then_some(0),
-            Skip::Octree { tree, leaf_level } => match tree.skip_byte(cell) {
-                TAGGED => None,
-                l if (l as u32) < *leaf_level => Some(0),
-                l => Some(l as u32),
-            },
+            Skip::Octree { .. } => unreachable!("traverse() walks octree tags in walk_octree"),
             Skip::Distance(p) => match p.get(cell) {
                 0 => None,
                 1 => Some(0),
@@ -504,7 +502,7 @@ impl OctreeWalk {
 
 /// Rays walked at once by [`walk_octree`]. Two measured best (single-thread
 /// traverse stage against one at a time: sphere 131 -> 124 ms, teapot 358 ->
-/// 323 ms); more lanes lose it again to branches that stop predicting.
+/// 323 ms); more were slower again (sphere: 4 → 127 ms, 16 → 130 ms).
 const WALKS: usize = 2;
 
 /// The cell walk over octree tags, [`WALKS`] rays at a time.
