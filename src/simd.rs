@@ -37,10 +37,21 @@ impl Isa {
         })
     }
 
+    /// Every level the running CPU can run, best first (for tests that
+    /// hold the levels to the same results).
+    pub fn available() -> Vec<Isa> {
+        [Isa::Avx512, Isa::Avx2, Isa::Portable]
+            .into_iter()
+            .filter(|&i| i.lanes() <= Isa::detect().lanes())
+            .collect()
+    }
+
     fn detect() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
             if std::arch::is_x86_feature_detected!("avx512f")
+                && std::arch::is_x86_feature_detected!("avx512vl")
+                && std::arch::is_x86_feature_detected!("avx512dq")
                 && std::arch::is_x86_feature_detected!("fma")
             {
                 return Isa::Avx512;
@@ -231,6 +242,43 @@ pub unsafe fn gather<const L: usize>(data: &[f64], base: &[usize; L], off: usize
     }
     // SAFETY: the caller guarantees the indices are in bounds.
     std::array::from_fn(|l| unsafe { *data.get_unchecked(base[l] + off) })
+}
+
+/// Bit `l` set when `⌊x[l]⌋ + ⌊y[l]⌋` is odd (wrapping), each floor as
+/// [`crate::filter::kernel::floor_fast`] gives it: NaN and `|v| ≥ 2⁶³` floor
+/// to `i64::MIN`, an even number. Under AVX-512 (`L == 8`) two rounding
+/// instructions, two conversions (whose out-of-range result is that same
+/// `i64::MIN`) and an integer test; lane by lane otherwise.
+#[inline(always)]
+pub fn odd_floor_sum_mask<const L: usize>(x: &[f64; 8], y: &[f64; 8]) -> u8 {
+    #[cfg(target_arch = "x86_64")]
+    if L == 8 {
+        // SAFETY: L == 8 runs only under Isa::Avx512.
+        return unsafe { odd_floor_sum_mask8(x, y) };
+    }
+    let mut mask = 0u8;
+    for l in 0..8 {
+        let f = crate::filter::kernel::floor_fast;
+        mask |= ((f(x[l]).wrapping_add(f(y[l])) & 1) as u8) << l;
+    }
+    mask
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512dq")]
+#[inline]
+unsafe fn odd_floor_sum_mask8(x: &[f64; 8], y: &[f64; 8]) -> u8 {
+    use std::arch::x86_64::*;
+    // SAFETY: both arrays hold 8 lanes; the features are enabled here.
+    unsafe {
+        let floor = |v: &[f64; 8]| {
+            _mm512_cvttpd_epi64(_mm512_roundscale_pd::<
+                { _MM_FROUND_TO_NEG_INF | _MM_FROUND_NO_EXC },
+            >(_mm512_loadu_pd(v.as_ptr())))
+        };
+        let sum = _mm512_add_epi64(floor(x), floor(y));
+        _mm512_test_epi64_mask(sum, _mm512_set1_epi64(1))
+    }
 }
 
 #[cfg(target_arch = "x86_64")]

@@ -204,12 +204,11 @@ impl Taps {
 type Grid = [[[f64; 2]; 5]; 5];
 
 /// `Σ_j wy[j] Σ_i wx[i] g[j][i]`, split: combine rows once per sub-point row.
+/// Every term is added, zero weights too, in order of `j`: the vectorised
+/// [`odd_count_chunked`] sums the same way, so the two agree bit for bit.
 fn rows(g: &Grid, wy: &[f64; 5]) -> [[f64; 2]; 5] {
     let mut r = [[0.0; 2]; 5];
     for (j, row) in g.iter().enumerate() {
-        if wy[j] == 0.0 {
-            continue;
-        }
         for i in 0..5 {
             r[i][0] += wy[j] * row[i][0];
             r[i][1] += wy[j] * row[i][1];
@@ -727,6 +726,110 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
     Some(acc.map(|v| (v / (n * n) as f64) as f32))
 }
 
+/// For each pixel of row `y`: the bounding box `[lo_u, lo_v, hi_u, hi_v]` of
+/// the hits of its 5×5 neighbourhood when all 25 reach the backdrop on one
+/// piece (the same event count), else `None` (also within two pixels of the
+/// border). Separable, as plain loops over the row: columns of 5 pixels
+/// first, then windows of 5 columns. Comparisons with NaN give nonsense
+/// boxes, but a NaN hit is never on a piece, so those pixels are `None`.
+fn interior_row(film: &Film, y: i64) -> Vec<Option<[f32; 4]>> {
+    let (w, h) = (film.width as usize, film.height as i64);
+    let mut out = vec![None; w];
+    if y < 2 || y + 2 >= h || w < 5 {
+        return out;
+    }
+    let rows: [usize; 5] = std::array::from_fn(|j| (y as usize + j - 2) * w);
+    let centre = rows[2];
+    // Columns: the box of 5 vertical hits, and whether they share the
+    // centre row's event count and are finite.
+    let mut col_box = vec![[0.0f32; 4]; w];
+    let mut col_ok = vec![false; w];
+    for x in 0..w {
+        let e = film.events[centre + x];
+        let (mut b, mut ok) = (
+            [
+                f32::INFINITY,
+                f32::INFINITY,
+                f32::NEG_INFINITY,
+                f32::NEG_INFINITY,
+            ],
+            true,
+        );
+        for &r in &rows {
+            let (u, v) = (film.u[r + x], film.v[r + x]);
+            ok &= film.events[r + x] == e && u.is_finite() && v.is_finite();
+            b = [
+                if u < b[0] { u } else { b[0] },
+                if v < b[1] { v } else { b[1] },
+                if u > b[2] { u } else { b[2] },
+                if v > b[3] { v } else { b[3] },
+            ];
+        }
+        col_box[x] = b;
+        col_ok[x] = ok;
+    }
+    for x in 2..w - 2 {
+        let e = film.events[centre + x];
+        let ok = (x - 2..=x + 2).all(|c| col_ok[c] && film.events[centre + c] == e);
+        if ok {
+            let mut b = col_box[x - 2];
+            for c in &col_box[x - 1..=x + 2] {
+                b = [
+                    b[0].min(c[0]),
+                    b[1].min(c[1]),
+                    b[2].max(c[2]),
+                    b[3].max(c[3]),
+                ];
+            }
+            out[x] = Some(b);
+        }
+    }
+    out
+}
+
+/// PRSS colour of a pixel whose whole 5×5 neighbourhood reaches the backdrop
+/// on the centre's piece — most pixels of a frame — for the bicubic map over
+/// a checkerboard, given that neighbourhood's bounding box `b` (from
+/// [`interior_row`]). The general path ([`prss_pixel`]) classifies each
+/// neighbour and fills a grid; here the one-square test first tries the
+/// bound over the whole 5×5 block, which contains each quadrant's bound of
+/// [`bicubic_in_one_square`] (its slack is four times theirs, far above the
+/// rounding of either), so it never says yes where they say no; then the
+/// film's rows fill the grid directly. Same colour and stats as the general
+/// path.
+fn prss_interior_checker(
+    c: &Ctx,
+    film: &Film,
+    (x, y): (i64, i64),
+    b: [f32; 4],
+    size: f64,
+    colors: &[[f32; 3]; 2],
+) -> [f32; 3] {
+    const NEG: f64 = 9.0 / 32.0;
+    let inv = 1.0 / size;
+    let w = film.width as usize;
+    let centre = y as usize * w + x as usize;
+    let one_square = (0..2).all(|k| {
+        let (lo, hi) = (b[k] as f64, b[k + 2] as f64);
+        let m = NEG * (hi - lo) + 4e-9 * (lo.abs() + hi.abs() + size);
+        floor_fast((lo - m) * inv) == floor_fast((hi + m) * inv)
+    });
+    if one_square {
+        return c
+            .backdrop
+            .color(film.u[centre] as f64, film.v[centre] as f64);
+    }
+    let g: Grid = std::array::from_fn(|j| {
+        let start = centre + j * w - 2 * w - 2;
+        std::array::from_fn(|i| [film.u[start + i] as f64, film.v[start + i] as f64])
+    });
+    if bicubic_in_one_square(&g, size) {
+        let [u, v] = g[2][2];
+        return c.backdrop.color(u, v);
+    }
+    checker_average(&g, &c.taps, size, colors)
+}
+
 /// The average of a checkerboard over the sub-points `taps` of the map `g`:
 /// the map is scaled to square units once, so each sub-point costs two
 /// floors and a parity instead of two divisions and a colour lookup, and
@@ -742,7 +845,7 @@ fn checker_average(g: &Grid, taps: &Taps, size: f64, colors: &[[f32; 3]; 2]) -> 
     let n = taps.t.len();
     let isa = crate::simd::Isa::current();
     let odd = crate::with_isa!(isa, L, _M => if L >= 4 {
-        odd_count_chunked(&gs, taps)
+        odd_count_chunked::<L>(&gs, taps)
     } else {
         odd_count(&gs, taps)
     });
@@ -770,37 +873,57 @@ fn odd_count(gs: &Grid, taps: &Taps) -> usize {
 
 /// [`odd_count`] a chunk of sub-points at a time, as vectors; only inside a
 /// function compiled with a rounding instruction (see [`checker_average`]).
+/// The rows of the grid combine for [`CHUNK`] sub-point rows at once (lane
+/// `k` is row `cy·CHUNK + k`), then each row's columns for a chunk of
+/// sub-points; the sums run in the order of [`rows`] and [`cols`].
 #[inline(always)]
-fn odd_count_chunked(gs: &Grid, taps: &Taps) -> usize {
+fn odd_count_chunked<const L: usize>(gs: &Grid, taps: &Taps) -> usize {
     let n = taps.t.len();
     let mut odd = 0usize;
-    for jy in 0..n {
-        let r = rows(gs, &taps.w[jy]);
-        for (c, wc) in taps.w_chunks.iter().enumerate() {
-            let (mut hx, mut hy) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
-            for i in 0..5 {
+    for (cy, wy) in taps.w_chunks.iter().enumerate() {
+        // r[i][axis][k]: Σ_j wy[j][k] gs[j][i][axis].
+        let mut r = [[[0.0f64; CHUNK]; 2]; 5];
+        for (j, row) in gs.iter().enumerate() {
+            for (ri, p) in r.iter_mut().zip(row) {
                 for k in 0..CHUNK {
-                    hx[k] += wc[i][k] * r[i][0];
-                    hy[k] += wc[i][k] * r[i][1];
+                    ri[0][k] += wy[j][k] * p[0];
+                    ri[1][k] += wy[j][k] * p[1];
                 }
             }
-            let live = (n - c * CHUNK).min(CHUNK);
-            // Parity per coordinate, exact for every float (|v| ≥ 2⁵³ is
-            // even); NaN and |v| ≥ 2⁶³ count as even, as i64::MIN does.
-            let parity = |v: f64| {
-                let f = v.floor();
-                if f.abs() < 9.223_372_036_854_776e18 {
-                    f - 2.0 * (0.5 * f).floor()
+        }
+        for k in 0..(n - cy * CHUNK).min(CHUNK) {
+            for (c, wc) in taps.w_chunks.iter().enumerate() {
+                let (mut hx, mut hy) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
+                for (i, ri) in r.iter().enumerate() {
+                    for m in 0..CHUNK {
+                        hx[m] += wc[i][m] * ri[0][k];
+                        hy[m] += wc[i][m] * ri[1][k];
+                    }
+                }
+                let live = (n - c * CHUNK).min(CHUNK);
+                let live_mask = ((1u16 << live) - 1) as u8;
+                let mask = if L == 8 {
+                    crate::simd::odd_floor_sum_mask::<L>(&hx, &hy)
                 } else {
-                    0.0
-                }
-            };
-            let mut count = 0u32;
-            for k in 0..CHUNK {
-                let is_odd = parity(hx[k]) != parity(hy[k]);
-                count += (is_odd && k < live) as u32;
+                    // Parity per coordinate, exact for every float (|v| ≥ 2⁵³
+                    // is even); NaN and |v| ≥ 2⁶³ count as even, as
+                    // i64::MIN does.
+                    let parity = |v: f64| {
+                        let f = v.floor();
+                        if f.abs() < 9.223_372_036_854_776e18 {
+                            f - 2.0 * (0.5 * f).floor()
+                        } else {
+                            0.0
+                        }
+                    };
+                    let mut mask = 0u8;
+                    for m in 0..CHUNK {
+                        mask |= ((parity(hx[m]) != parity(hy[m])) as u8) << m;
+                    }
+                    mask
+                };
+                odd += (mask & live_mask).count_ones() as usize;
             }
-            odd += count as usize;
         }
     }
     odd
@@ -887,12 +1010,27 @@ pub fn shade(
         coarse: (1..n).map(|k| Taps::new(k, s.map)).collect(),
         unresolved,
     };
+    // The fast path for pixels inside one piece of the map (see
+    // [`prss_interior_checker`]): the default bicubic map over a checkerboard,
+    // where no fallback other than `trace`'s curvature test can change them.
+    let interior = match &backdrop.pattern {
+        Pattern::Checker { size, colors }
+            if s.map == PrssMap::Bicubic && s.fallback != PrssFallback::Trace =>
+        {
+            Some((*size, colors))
+        }
+        _ => None,
+    };
     let rows: Vec<(Vec<[f32; 3]>, Vec<u32>, PostStats)> = (0..film.height as i64)
         .into_par_iter()
         .map(|y| {
             let mut st = PostStats::default();
             let mut colors = Vec::with_capacity(film.width as usize);
             let mut flagged = Vec::new();
+            let boxes = match interior {
+                Some(_) => interior_row(film, y),
+                None => Vec::new(),
+            };
             for x in 0..film.width as i64 {
                 let pixel = (y * c.map.w + x) as u32;
                 let hit = c.map.at(x, y).is_some();
@@ -901,7 +1039,13 @@ pub fn shade(
                 } else {
                     st.pixels += 1;
                     match s.mode {
-                        Mode::Prss => prss_pixel(&c, x, y, &mut st),
+                        Mode::Prss => match (interior, boxes.get(x as usize)) {
+                            (Some((size, colors)), Some(&Some(b))) => {
+                                st.quadrants_interpolated += 4;
+                                Some(prss_interior_checker(&c, film, (x, y), b, size, colors))
+                            }
+                            _ => prss_pixel(&c, x, y, &mut st),
+                        },
                         Mode::Footprint => footprint_pixel(&c, x, y, &mut st),
                     }
                 };
@@ -969,11 +1113,10 @@ mod tests {
                         g[case % 5][(case / 5) % 5][case % 2] = specials[case % specials.len()];
                     }
                     let want = odd_count(&g, &taps);
-                    let got = crate::with_isa!(crate::simd::Isa::current(), L, _M => {
-                        let _ = L;
-                        odd_count_chunked(&g, &taps)
-                    });
-                    assert_eq!(got, want, "n {n} {map:?} case {case}");
+                    for isa in crate::simd::Isa::available() {
+                        let got = crate::with_isa!(isa, L, _M => odd_count_chunked::<L>(&g, &taps));
+                        assert_eq!(got, want, "{isa:?} n {n} {map:?} case {case}");
+                    }
                 }
             }
         }
@@ -1096,6 +1239,71 @@ mod tests {
     /// A film of two flat pieces split by the line `x + slope·y = b` (image
     /// coordinates, pixel centres at +0.5): white on the left (events 0),
     /// black on the right (events 2).
+    #[test]
+    fn interior_fast_path_matches_the_general_path() {
+        // A warped map (minifying in places, so many pixels straddle
+        // squares), a disc on another piece, a hole without hits and a
+        // stripe of huge values: wherever the fast path applies it must give
+        // the general path's colour.
+        let (w, h) = (48u32, 40u32);
+        let mut f = Film::new(w, h);
+        for y in 0..h {
+            for x in 0..w {
+                let i = (y * w + x) as usize;
+                let (fx, fy) = (x as f64, y as f64);
+                let disc = (fx - 30.0).powi(2) + (fy - 20.0).powi(2) < 64.0;
+                let (u, v, e) = if disc {
+                    (-3.1 * fx + 0.4 * fy * fy, 2.7 * fy - 0.05 * fx * fy, 2.0)
+                } else {
+                    (
+                        0.9 * fx + 2.0 * (0.3 * fy).sin(),
+                        0.7 * fy + 0.02 * fx * fx,
+                        0.0,
+                    )
+                };
+                f.u[i] = if y == 33 { 3e30 } else { u as f32 };
+                f.v[i] = v as f32;
+                f.events[i] = e;
+                if (5..8).contains(&x) && (5..9).contains(&y) {
+                    f.u[i] = f32::NAN;
+                    f.v[i] = f32::NAN;
+                }
+            }
+        }
+        let bd = checker(4.0);
+        let s = settings(PrssMap::Bicubic, PrssFallback::Blend);
+        let c = Ctx {
+            map: HitMap::new(&f),
+            backdrop: &bd,
+            background: [0.5; 3],
+            s: &s,
+            taps: Taps::new(8, PrssMap::Bicubic),
+            hats: Taps::new(8, PrssMap::Bilinear),
+            coarse: (1..8).map(|k| Taps::new(k, PrssMap::Bicubic)).collect(),
+            unresolved: Vec::new(),
+        };
+        let (mut fast, mut mixed) = (0, 0);
+        for y in 0..h as i64 {
+            let boxes = interior_row(&f, y);
+            for x in 0..w as i64 {
+                let Some(b) = boxes[x as usize] else {
+                    continue;
+                };
+                let mut st = PostStats::default();
+                let want = prss_pixel(&c, x, y, &mut st).unwrap();
+                let got = prss_interior_checker(&c, &f, (x, y), b, 4.0, &[[1.0; 3], [0.0; 3]]);
+                assert_eq!(got, want, "({x}, {y})");
+                assert_eq!(st.quadrants_interpolated, 4);
+                fast += 1;
+                mixed += (got[0] != 0.0 && got[0] != 1.0) as usize;
+            }
+        }
+        assert!(
+            fast > 800 && mixed > 200,
+            "{fast} fast pixels, {mixed} mixed"
+        );
+    }
+
     fn two_pieces(w: u32, h: u32, slope: f64, b: f64) -> Film {
         let mut f = Film::new(w, h);
         for y in 0..h {
