@@ -54,8 +54,12 @@ pub struct Rays<'a> {
     pub cell: [BVec<'a, i32>; 3],
     /// The traversal must first step past `cell` (its solve found nothing).
     pub advance: BVec<'a, bool>,
-    /// Medium: inside the object (`f > iso`).
+    /// Medium: inside the object (`f > iso`); valid once `side_known`.
     pub inside: BVec<'a, bool>,
+    /// False from the entry stage until the first solve needs the medium: it
+    /// is the field's side at the entry point (`t_start` of the first
+    /// piece), and a ray that meets no candidate cell never needs it.
+    pub side_known: BVec<'a, bool>,
     pub events: BVec<'a, u32>,
     pub fate: BVec<'a, Fate>,
 }
@@ -84,6 +88,7 @@ impl<'a> Rays<'a> {
             ],
             advance: BVec::with_capacity_in(n, bump),
             inside: BVec::with_capacity_in(n, bump),
+            side_known: BVec::with_capacity_in(n, bump),
             events: BVec::with_capacity_in(n, bump),
             fate: BVec::with_capacity_in(n, bump),
         }
@@ -119,6 +124,7 @@ impl<'a> Rays<'a> {
         self.seg_g[1].push(0.0);
         self.advance.push(false);
         self.inside.push(false);
+        self.side_known.push(true);
         self.events.push(0);
         self.fate.push(Fate::Active);
         i

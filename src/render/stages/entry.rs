@@ -7,6 +7,7 @@ use super::super::packet::{Fate, Queue, Rays};
 use super::{field_minus_iso, place};
 use crate::render::stats::Counters;
 use crate::roots::inside;
+use crate::scene::Traversal;
 
 pub fn entry<const S: usize>(
     ctx: &Ctx,
@@ -32,11 +33,26 @@ pub fn entry<const S: usize>(
             }
             Some((t0, t1)) => {
                 c.rays_entering += 1;
-                let g = field_minus_iso::<S>(ctx, ctx.to_grid(o + t0 * d), c);
-                rays.inside[i] = inside(g);
                 place::<S>(ctx, rays, i, t0, t1, c);
+                if ctx.traversal() == Traversal::Step {
+                    set_side::<S>(ctx, rays, i, c);
+                } else {
+                    // Deferred to the first solve (see `Rays::side_known`).
+                    rays.side_known[i] = false;
+                }
                 traverse.push(r);
             }
         }
     }
+}
+
+/// Sets ray `i`'s medium from the field at the start of its first piece,
+/// where it entered the domain: the point the entry stage found, so deferring
+/// this evaluation changes no bit of it.
+#[inline]
+pub(crate) fn set_side<const S: usize>(ctx: &Ctx, rays: &mut Rays, i: usize, c: &mut Counters) {
+    let p = rays.origin(i) + rays.t_start[i] * rays.direction(i);
+    let g = field_minus_iso::<S>(ctx, ctx.to_grid(p), c);
+    rays.inside[i] = inside(g);
+    rays.side_known[i] = true;
 }

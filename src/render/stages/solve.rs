@@ -11,6 +11,7 @@
 
 use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
+use super::entry::set_side;
 use super::field_minus_iso;
 use crate::filter::restrict::LaneSegments;
 use crate::render::stats::Counters;
@@ -101,6 +102,9 @@ fn solve_cells<const S: usize, const L: usize, M: Madd>(
             c.cells_solved += 1;
             let mut hit = None;
             if len > 1e-13 {
+                if !rays.side_known[i] {
+                    set_side::<S>(ctx, rays, i, c);
+                }
                 let from_inside = rays.inside[i];
                 if lane_stays(&bern, d, l, from_inside) {
                     c.isolation_intervals += 1;
