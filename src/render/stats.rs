@@ -66,7 +66,9 @@ pub struct Counters {
     pub cells_with_crossing: u64,
     /// Point evaluations of the field (value or value+gradient).
     pub kernel_evals: u64,
-    /// Brent iterations over all solves.
+    /// Root-refinement evaluations over all solves: the lane-parallel Newton
+    /// of single crossings, Brent after subdivision, Brent on step brackets
+    /// (the name predates the Newton refinement; kept for the stats files).
     pub brent_iters: u64,
     /// Bernstein intervals examined during isolation.
     pub isolation_intervals: u64,
@@ -221,7 +223,7 @@ impl RenderStats {
             ));
         }
         s.push_str(&format!(
-            "per ray: {:.2} cells visited, {:.2} solved ({:.0}% held a crossing), {:.2} kernel evals, {:.2} Brent iterations\n",
+            "per ray: {:.2} cells visited, {:.2} solved ({:.0}% held a crossing), {:.2} kernel evals, {:.2} root-refinement evaluations\n",
             c.cells_visited as f64 / rays,
             c.cells_solved as f64 / rays,
             100.0 * c.cells_with_crossing as f64 / c.cells_solved.max(1) as f64,

@@ -144,6 +144,129 @@ pub fn lane_stays<const L: usize>(
     }
 }
 
+/// Lane `l` has exactly one sign variation in its Bernstein coefficients
+/// (so exactly one crossing in `(0, 1)`), starting on the `from_inside` side:
+/// the case [`refine_lanes`] solves.
+#[inline(always)]
+pub fn lane_single_crossing<const L: usize>(
+    bern: &[[f64; L]; N],
+    d: usize,
+    l: usize,
+    from_inside: bool,
+) -> bool {
+    let mut variations = 0;
+    for k in 0..d {
+        variations += (inside(bern[k][l]) != inside(bern[k + 1][l])) as u32;
+    }
+    variations == 1 && inside(bern[0][l]) == from_inside
+}
+
+/// Iterations of [`refine_lanes`] at most; bisection alone would reach
+/// machine precision on `[0, 1]` in 53.
+const REFINE_ITERS: usize = 64;
+
+/// The crossing of every `active` lane (each with exactly one sign variation,
+/// see [`lane_single_crossing`]) by safeguarded Newton on the monomial form,
+/// all lanes in step: one Horner pass evaluates `g` and `g'` for every lane,
+/// so refining three crossings of a group costs one's latency.
+///
+/// Each lane starts where its Bernstein control polygon changes sign (close
+/// to the root for the smooth restrictions of a cell), keeps the bracket
+/// `[lo, hi]` the sign changes in, and takes the Newton step when it stays
+/// inside the bracket, else bisects. A lane stops when `g` is exactly zero,
+/// the step stops moving it, or a short step (below 1e-9) no longer lowers
+/// `|g|`: the root then sits at machine precision. A stopped lane is frozen,
+/// so its result depends on its own polynomial alone, never on the others in
+/// its group. Returns the roots and the evaluations each lane spent.
+#[inline(always)]
+pub fn refine_lanes<const L: usize, M: crate::simd::Madd>(
+    mono: &[[f64; L]; N],
+    bern: &[[f64; L]; N],
+    d: usize,
+    active: [bool; L],
+) -> ([f64; L], [u32; L]) {
+    let eval = |x: &[f64; L]| {
+        let (mut v, mut dv) = ([0.0f64; L], [0.0f64; L]);
+        for k in (0..=d).rev() {
+            for l in 0..L {
+                dv[l] = M::madd(dv[l], x[l], v[l]);
+                v[l] = M::madd(v[l], x[l], mono[k][l]);
+            }
+        }
+        (v, dv)
+    };
+    let mut x = [0.5f64; L];
+    let (mut lo, mut hi) = ([0.0f64; L], [1.0f64; L]);
+    let mut lo_in = [false; L];
+    for l in 0..L {
+        lo_in[l] = inside(bern[0][l]);
+        for k in 0..d {
+            let (a, b) = (bern[k][l], bern[k + 1][l]);
+            if inside(a) != inside(b) {
+                let f = (a / (a - b)).clamp(0.0, 1.0);
+                x[l] = (k as f64 + f) / d as f64;
+                break;
+            }
+        }
+    }
+    let (mut g, mut dg) = eval(&x);
+    let mut done = active.map(|a| !a);
+    let mut evals = [1u32; L];
+    for _ in 0..REFINE_ITERS {
+        let mut next = x;
+        for l in 0..L {
+            if done[l] {
+                continue;
+            }
+            if g[l] == 0.0 {
+                done[l] = true;
+                continue;
+            }
+            if inside(g[l]) == lo_in[l] {
+                lo[l] = x[l];
+            } else {
+                hi[l] = x[l];
+            }
+            let newton = x[l] - g[l] / dg[l];
+            let inside_bracket = newton > lo[l] && newton < hi[l];
+            if (newton - x[l]).abs() < 1e-14 {
+                // Converged: the step is below the root's rounding (and
+                // may fall on the bracket end `x` just became).
+                if inside_bracket {
+                    x[l] = newton;
+                }
+                done[l] = true;
+                continue;
+            }
+            next[l] = if inside_bracket {
+                newton
+            } else {
+                0.5 * (lo[l] + hi[l])
+            };
+            if next[l] == x[l] {
+                done[l] = true;
+            }
+        }
+        if done.iter().all(|&d| d) {
+            break;
+        }
+        let (gn, dn) = eval(&next);
+        for l in 0..L {
+            if done[l] {
+                continue;
+            }
+            evals[l] += 1;
+            let step = (next[l] - x[l]).abs();
+            if gn[l].abs() >= g[l].abs() && step < 1e-9 {
+                done[l] = true;
+                continue;
+            }
+            (x[l], g[l], dg[l]) = (next[l], gn[l], dn[l]);
+        }
+    }
+    (x, evals)
+}
+
 impl SegmentPoly {
     /// `g(s)` by Horner on the monomial form.
     #[inline(always)]
@@ -336,6 +459,85 @@ mod tests {
         assert!((s - 0.502).abs() < 1e-10, "{s}");
         // Sampling the ends alone would see no sign change at all:
         assert!(!inside(p.eval(0.0)) && !inside(p.eval(1.0)));
+    }
+
+    #[test]
+    fn lanes_refine_single_crossings_to_machine_precision_each_on_its_own() {
+        // Degree 9: (s - r)·(a + s)·(1 + b s²)·(c - s)⁵, one root r in
+        // (0, 1), steep and flat, near either end; every lane against the
+        // isolation path's Brent at 1e-14, and against itself among other
+        // neighbours (a frozen lane must not move while others iterate).
+        let basis = BernsteinBasis::new(9);
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let mut polys = Vec::new();
+        for case in 0..64 {
+            let r = if case % 2 == 1 {
+                0.001 + 0.998 * next()
+            } else {
+                [1e-6f64, 0.999_999, 0.5][case / 2 % 3]
+            };
+            let (a, b, c) = (0.05 + 3.0 * next(), 4.0 * next(), 1.2 + next());
+            let scale = [1e-6, 1.0, 300.0][case % 3] * if case % 4 < 2 { 1.0 } else { -1.0 };
+            let mut p = vec![-r * scale, scale];
+            let lin = vec![c, -1.0];
+            for q in [
+                vec![a, 1.0],
+                vec![1.0, 0.0, b],
+                lin.clone(),
+                lin.clone(),
+                lin.clone(),
+                lin.clone(),
+                lin,
+            ] {
+                let mut n = vec![0.0; p.len() + q.len() - 1];
+                for (i, &x) in p.iter().enumerate() {
+                    for (j, &y) in q.iter().enumerate() {
+                        n[i + j] += x * y;
+                    }
+                }
+                p = n;
+            }
+            assert_eq!(p.len(), 10);
+            polys.push((r, p));
+        }
+        let refine = |lanes: &[&Vec<f64>]| {
+            let mut mono = [[0.0f64; 8]; N];
+            let mut active = [false; 8];
+            for (l, p) in lanes.iter().enumerate() {
+                for k in 0..10 {
+                    mono[k][l] = p[k];
+                }
+                active[l] = true;
+            }
+            let bern = basis.bernstein_lanes::<8, crate::simd::Plain>(&mono);
+            for l in 0..lanes.len() {
+                let from_inside = inside(bern[0][l]);
+                assert!(lane_single_crossing(&bern, 9, l, from_inside), "lane {l}");
+            }
+            refine_lanes::<8, crate::simd::Plain>(&mono, &bern, 9, active)
+        };
+        for batch in polys.chunks(8) {
+            let lanes: Vec<&Vec<f64>> = batch.iter().map(|(_, p)| p).collect();
+            let (x, evals) = refine(&lanes);
+            for (l, (r, p)) in batch.iter().enumerate() {
+                let seg = basis.segment(p);
+                let want = seg
+                    .first_crossing(inside(p[0]), 1e-14, &mut IsolationWork::default())
+                    .unwrap();
+                assert!((x[l] - want).abs() < 1e-12, "lane {l}: {} vs {want}", x[l]);
+                assert!((x[l] - r).abs() < 1e-9, "lane {l}: {} vs root {r}", x[l]);
+                assert!(evals[l] <= 12, "lane {l}: {} evaluations", evals[l]);
+                // The same polynomial alone in its group: the same bits.
+                let (alone, _) = refine(std::slice::from_ref(&p));
+                assert_eq!(alone[0].to_bits(), x[l].to_bits(), "lane {l}");
+            }
+        }
     }
 
     #[test]
