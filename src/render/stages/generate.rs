@@ -69,4 +69,5 @@ pub fn generate(ctx: &Ctx, region: &Region, sampling: Sampling, rays: &mut Rays,
             }
         }
     });
+    rays.complete();
 }
