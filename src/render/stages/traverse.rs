@@ -142,20 +142,26 @@ pub fn meets_tagged_sub_cell(ray: &CellRay, cell: [i64; 3], t0: f64, t1: f64, ma
     let local = |a: usize, t: f64| n * (ray.ou[a] + t * ray.du[a] - cell[a] as f64);
     let index = |v: f64| (floor_fast(v).clamp(0, SUB as i64 - 1)) as usize;
     let mut bbox = u64::MAX;
+    let mut idx = [0usize; 3];
     for a in 0..3 {
         let (v0, v1) = (local(a, t0), local(a, t1));
+        idx[a] = index(v0);
         let (lo, hi) = if v0 <= v1 { (v0, v1) } else { (v1, v0) };
         bbox &= AXIS_SPAN[a][index(lo - 1e-9)][index(hi + 1e-9)];
     }
     if mask & bbox == 0 {
         return false;
     }
-    let mut idx = [0usize; 3];
+    // The walk's first sub-cell, before setting the walk up: most calls end
+    // early (sphere: 606k of the 631k calls past the box test find a tagged
+    // sub-cell, after 1.9 sub-cells on average).
+    if mask >> (idx[0] + SUB * (idx[1] + SUB * idx[2])) & 1 == 1 {
+        return true;
+    }
     let mut t_max = [f64::INFINITY; 3];
     let mut t_delta = [0.0f64; 3];
     for a in 0..3 {
-        let k = index(local(a, t0));
-        idx[a] = k;
+        let k = idx[a];
         if ray.du[a] > 0.0 {
             t_max[a] = (cell[a] as f64 + (k + 1) as f64 / n - ray.ou[a]) * ray.inv[a];
             t_delta[a] = ray.inv[a] / n;
