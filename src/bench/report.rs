@@ -353,7 +353,7 @@ equal: pixels whose ray met as many interfaces as the reference's.",
         "cells solved",
         "solved with crossing",
         "kernel evals",
-        "Brent iters",
+        "root evals",
     ]);
     s.push_str(&table_head(&headers, |i| i >= right_from));
     for row in rows {

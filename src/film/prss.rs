@@ -340,7 +340,7 @@ fn inverse_phi(p: f64) -> f64 {
 fn edge_line(map: &HitMap, x: i64, y: i64, centre: Option<f32>) -> Option<EdgeLine> {
     let s2 = EDGE_SIGMA * EDGE_SIGMA;
     // The window's Gaussian weights, computed once (81 `exp` per boundary
-    // pixel were a tenth of the stage on the teapot).
+    // pixel cost 6% of the stage on the teapot).
     static WEIGHTS: std::sync::OnceLock<[f64; EDGE_SIDE * EDGE_SIDE]> = std::sync::OnceLock::new();
     let weights = WEIGHTS.get_or_init(|| {
         std::array::from_fn(|k| {

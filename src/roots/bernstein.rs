@@ -174,8 +174,10 @@ const REFINE_ITERS: usize = 64;
 /// to the root for the smooth restrictions of a cell), keeps the bracket
 /// `[lo, hi]` the sign changes in, and takes the Newton step when it stays
 /// inside the bracket, else bisects. A lane stops when `g` is exactly zero,
-/// the step stops moving it, or a short step (below 1e-9) no longer lowers
-/// `|g|`: the root then sits at machine precision. A stopped lane is frozen,
+/// when its Newton step falls below 1e-14 (taken without another
+/// evaluation, if inside the bracket), when a step no longer moves it, or
+/// when a short step (below 1e-9) no longer lowers `|g|`: the root then sits
+/// at machine precision. A stopped lane is frozen,
 /// so its result depends on its own polynomial alone, never on the others in
 /// its group. Returns the roots and the evaluations each lane spent.
 #[inline(always)]
