@@ -249,11 +249,15 @@ pub unsafe fn gather<const L: usize>(data: &[f64], base: &[usize; L], off: usize
 /// to `i64::MIN`, an even number. Under AVX-512 (`L == 8`) two rounding
 /// instructions, two conversions (whose out-of-range result is that same
 /// `i64::MIN`) and an integer test; lane by lane otherwise.
+///
+/// # Safety
+/// `L == 8` only where AVX-512 (F and DQ) is available, as inside
+/// [`with_isa!`](crate::with_isa) under [`Isa::Avx512`].
 #[inline(always)]
-pub fn odd_floor_sum_mask<const L: usize>(x: &[f64; 8], y: &[f64; 8]) -> u8 {
+pub unsafe fn odd_floor_sum_mask<const L: usize>(x: &[f64; 8], y: &[f64; 8]) -> u8 {
     #[cfg(target_arch = "x86_64")]
     if L == 8 {
-        // SAFETY: L == 8 runs only under Isa::Avx512.
+        // SAFETY: the caller runs L == 8 only with AVX-512.
         return unsafe { odd_floor_sum_mask8(x, y) };
     }
     let mut mask = 0u8;

@@ -883,7 +883,9 @@ fn odd_count(gs: &Grid, taps: &Taps) -> usize {
 }
 
 /// [`odd_count`] a chunk of sub-points at a time, as vectors; only inside a
-/// function compiled with a rounding instruction (see [`checker_average`]).
+/// function compiled with a rounding instruction, `L` being that
+/// instruction set's lanes (`with_isa!`, see [`checker_average`]): `L == 8`
+/// takes the AVX-512 parity.
 /// The rows of the grid combine for [`CHUNK`] sub-point rows at once (lane
 /// `k` is row `cy·CHUNK + k`), then each row's columns for a chunk of
 /// sub-points; the sums run in the order of [`rows`] and [`cols`].
@@ -914,7 +916,8 @@ fn odd_count_chunked<const L: usize>(gs: &Grid, taps: &Taps) -> usize {
                 let live = (n - c * CHUNK).min(CHUNK);
                 let live_mask = ((1u16 << live) - 1) as u8;
                 let mask = if L == 8 {
-                    crate::simd::odd_floor_sum_mask::<L>(&hx, &hy)
+                    // SAFETY: L == 8 only under Isa::Avx512 (`with_isa!`).
+                    unsafe { crate::simd::odd_floor_sum_mask::<L>(&hx, &hy) }
                 } else {
                     // Parity per coordinate, exact for every float (|v| ≥ 2⁵³
                     // is even); NaN and |v| ≥ 2⁶³ count as even, as
@@ -1022,11 +1025,14 @@ pub fn shade(
         unresolved,
     };
     // The fast path for pixels inside one piece of the map (see
-    // [`prss_interior_checker`]): the default bicubic map over a checkerboard,
-    // where no fallback other than `trace`'s curvature test can change them.
+    // [`prss_interior_checker`]): PRSS with the default bicubic map over a
+    // checkerboard, where no fallback other than `trace`'s curvature test
+    // can change them.
     let interior = match &backdrop.pattern {
         Pattern::Checker { size, colors }
-            if s.map == PrssMap::Bicubic && s.fallback != PrssFallback::Trace =>
+            if s.mode == Mode::Prss
+                && s.map == PrssMap::Bicubic
+                && s.fallback != PrssFallback::Trace =>
         {
             Some((*size, colors))
         }
