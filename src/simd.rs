@@ -248,7 +248,10 @@ pub unsafe fn gather<const L: usize>(data: &[f64], base: &[usize; L], off: usize
 /// [`crate::filter::kernel::floor_fast`] gives it: NaN and `|v| ≥ 2⁶³` floor
 /// to `i64::MIN`, an even number. Under AVX-512 (`L == 8`) two rounding
 /// instructions, two conversions (whose out-of-range result is that same
-/// `i64::MIN`) and an integer test; lane by lane otherwise.
+/// `i64::MIN`) and an integer test. Otherwise (AVX2 has no packed
+/// conversion to 64-bit integers) each coordinate's parity in floats,
+/// `f - 2⌊f/2⌋` of `f = ⌊v⌋`: exact for every float (`|v| ≥ 2⁵³` is even),
+/// with NaN and `|v| ≥ 2⁶³` counted even — the same bits.
 ///
 /// # Safety
 /// `L == 8` only where AVX-512 (F and DQ) is available, as inside
@@ -260,10 +263,17 @@ pub unsafe fn odd_floor_sum_mask<const L: usize>(x: &[f64; 8], y: &[f64; 8]) -> 
         // SAFETY: the caller runs L == 8 only with AVX-512.
         return unsafe { odd_floor_sum_mask8(x, y) };
     }
+    let parity = |v: f64| {
+        let f = v.floor();
+        if f.abs() < 9.223_372_036_854_776e18 {
+            f - 2.0 * (0.5 * f).floor()
+        } else {
+            0.0
+        }
+    };
     let mut mask = 0u8;
     for l in 0..8 {
-        let f = crate::filter::kernel::floor_fast;
-        mask |= ((f(x[l]).wrapping_add(f(y[l])) & 1) as u8) << l;
+        mask |= ((parity(x[l]) != parity(y[l])) as u8) << l;
     }
     mask
 }

@@ -884,8 +884,8 @@ fn odd_count(gs: &Grid, taps: &Taps) -> usize {
 
 /// [`odd_count`] a chunk of sub-points at a time, as vectors; only inside a
 /// function compiled with a rounding instruction, `L` being that
-/// instruction set's lanes (`with_isa!`, see [`checker_average`]): `L == 8`
-/// takes the AVX-512 parity.
+/// instruction set's lanes (`with_isa!`, see [`checker_average`]): the
+/// parities come from [`crate::simd::odd_floor_sum_mask`].
 /// The rows of the grid combine for [`CHUNK`] sub-point rows at once (lane
 /// `k` is row `cy·CHUNK + k`), then each row's columns for a chunk of
 /// sub-points; the sums run in the order of [`rows`] and [`cols`].
@@ -915,27 +915,8 @@ fn odd_count_chunked<const L: usize>(gs: &Grid, taps: &Taps) -> usize {
                 }
                 let live = (n - c * CHUNK).min(CHUNK);
                 let live_mask = ((1u16 << live) - 1) as u8;
-                let mask = if L == 8 {
-                    // SAFETY: L == 8 only under Isa::Avx512 (`with_isa!`).
-                    unsafe { crate::simd::odd_floor_sum_mask::<L>(&hx, &hy) }
-                } else {
-                    // Parity per coordinate, exact for every float (|v| ≥ 2⁵³
-                    // is even); NaN and |v| ≥ 2⁶³ count as even, as
-                    // i64::MIN does.
-                    let parity = |v: f64| {
-                        let f = v.floor();
-                        if f.abs() < 9.223_372_036_854_776e18 {
-                            f - 2.0 * (0.5 * f).floor()
-                        } else {
-                            0.0
-                        }
-                    };
-                    let mut mask = 0u8;
-                    for m in 0..CHUNK {
-                        mask |= ((parity(hx[m]) != parity(hy[m])) as u8) << m;
-                    }
-                    mask
-                };
+                // SAFETY: L == 8 only under Isa::Avx512 (`with_isa!`).
+                let mask = unsafe { crate::simd::odd_floor_sum_mask::<L>(&hx, &hy) };
                 odd += (mask & live_mask).count_ones() as usize;
             }
         }

@@ -35,7 +35,9 @@ pub fn entry<const S: usize>(
                 c.rays_entering += 1;
                 place::<S>(ctx, rays, i, t0, t1, c);
                 if ctx.traversal() == Traversal::Step {
-                    set_side::<S>(ctx, rays, i, c);
+                    // `place` sampled the field at this very point (the
+                    // march's first sample).
+                    rays.inside[i] = inside(rays.seg_g[0][i]);
                 } else {
                     // Deferred to the first solve (see `Rays::side_known`).
                     rays.side_known[i] = false;

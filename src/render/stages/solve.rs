@@ -51,8 +51,9 @@ pub fn solve<const S: usize>(
 /// gather per coefficient across lanes) and its Bernstein form for the whole
 /// group in SIMD. Lanes whose Bernstein coefficients change sign once hold
 /// exactly one crossing: they are refined together by Newton
-/// ([`refine_lanes`]; single thread, sphere: 3 evaluations per crossing
-/// where Brent and the polish took 6, solve stage 110 → 82 ms). Lanes with
+/// ([`refine_lanes`]; single thread, sphere: 3.0 evaluations per crossing
+/// where Brent took 4.0 before its polish's uncounted Newton steps, solve
+/// stage 110 → 82 ms). Lanes with
 /// more sign changes go on to scalar isolation and Brent.
 ///
 /// Restricting from the coefficients costs more multiply-adds than from a
