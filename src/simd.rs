@@ -244,6 +244,87 @@ pub unsafe fn gather<const L: usize>(data: &[f64], base: &[usize; L], off: usize
     std::array::from_fn(|l| unsafe { *data.get_unchecked(base[l] + off) })
 }
 
+/// Rows of four: `out[i][l] = data[base[l] + off + i]` for `i < 4`, each
+/// lane's row loaded as one 256-bit vector and the 4 × `L` block transposed
+/// in registers — the same values as four [`gather`]s, in half the time where
+/// the rows are contiguous (the x-rows of a cubic neighbourhood).
+///
+/// # Safety
+/// As [`gather`], for every `base[l] + off + 3`.
+#[inline(always)]
+pub unsafe fn gather_rows4<const L: usize>(
+    data: &[f64],
+    base: &[usize; L],
+    off: usize,
+) -> [[f64; L]; 4] {
+    debug_assert!(base.iter().all(|&b| b + off + 3 < data.len()));
+    #[cfg(target_arch = "x86_64")]
+    {
+        let ptr = data.as_ptr().wrapping_add(off);
+        if L == 8 {
+            // SAFETY: L == 8 runs only under Isa::Avx512; rows in bounds.
+            let v = unsafe { rows4x8(ptr, base.as_ptr()) };
+            // SAFETY: L == 8, so the types are the same.
+            return unsafe { std::mem::transmute_copy(&v) };
+        }
+        if L == 4 {
+            // SAFETY: L == 4 runs only under Isa::Avx2 or better.
+            let v = unsafe { rows4x4(ptr, base.as_ptr()) };
+            // SAFETY: as above, with 4.
+            return unsafe { std::mem::transmute_copy(&v) };
+        }
+    }
+    // SAFETY: the caller guarantees the indices are in bounds.
+    std::array::from_fn(|i| {
+        std::array::from_fn(|l| unsafe { *data.get_unchecked(base[l] + off + i) })
+    })
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f")]
+#[inline]
+unsafe fn rows4x8(ptr: *const f64, idx: *const usize) -> [[f64; 8]; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: 8 indices at `idx`; each row `ptr + idx[l] .. + 4` in bounds.
+    unsafe {
+        let row = |l: usize| _mm256_loadu_pd(ptr.add(*idx.add(l)));
+        // Lanes (0, 2 | 1, 3) and (4, 6 | 5, 7) side by side, so the final
+        // 128-bit shuffles put the lanes back in order.
+        let pair = |lo: usize, hi: usize| {
+            _mm512_insertf64x4::<1>(_mm512_castpd256_pd512(row(lo)), row(hi))
+        };
+        let (z0, z1, z2, z3) = (pair(0, 2), pair(1, 3), pair(4, 6), pair(5, 7));
+        // (x0 x1)(z0 z1)(x2 x3)(z2 z3) for x = a, b and z = c, d.
+        let (ac0, bd0) = (_mm512_unpacklo_pd(z0, z1), _mm512_unpackhi_pd(z0, z1));
+        let (ac1, bd1) = (_mm512_unpacklo_pd(z2, z3), _mm512_unpackhi_pd(z2, z3));
+        let a = _mm512_shuffle_f64x2::<0x88>(ac0, ac1);
+        let c = _mm512_shuffle_f64x2::<0xDD>(ac0, ac1);
+        let b = _mm512_shuffle_f64x2::<0x88>(bd0, bd1);
+        let d = _mm512_shuffle_f64x2::<0xDD>(bd0, bd1);
+        std::mem::transmute([a, b, c, d])
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx2")]
+#[inline]
+unsafe fn rows4x4(ptr: *const f64, idx: *const usize) -> [[f64; 4]; 4] {
+    use std::arch::x86_64::*;
+    // SAFETY: 4 indices at `idx`; each row `ptr + idx[l] .. + 4` in bounds.
+    unsafe {
+        let row = |l: usize| _mm256_loadu_pd(ptr.add(*idx.add(l)));
+        let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
+        let (ac0, bd0) = (_mm256_unpacklo_pd(r0, r1), _mm256_unpackhi_pd(r0, r1));
+        let (ac1, bd1) = (_mm256_unpacklo_pd(r2, r3), _mm256_unpackhi_pd(r2, r3));
+        std::mem::transmute([
+            _mm256_permute2f128_pd::<0x20>(ac0, ac1),
+            _mm256_permute2f128_pd::<0x20>(bd0, bd1),
+            _mm256_permute2f128_pd::<0x31>(ac0, ac1),
+            _mm256_permute2f128_pd::<0x31>(bd0, bd1),
+        ])
+    }
+}
+
 /// Bit `l` set when `⌊x[l]⌋ + ⌊y[l]⌋` is odd (wrapping), each floor as
 /// [`crate::filter::kernel::floor_fast`] gives it: NaN and `|v| ≥ 2⁶³` floor
 /// to `i64::MIN`, an even number. Under AVX-512 (`L == 8`) two rounding
@@ -322,6 +403,26 @@ unsafe fn gather4(ptr: *const f64, idx: *const usize) -> [f64; 4] {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn row_loads_equal_gathers_on_every_isa() {
+        let data: Vec<f64> = (0..500)
+            .map(|i| (i as f64 * 0.37).sin() * 1e3 + i as f64)
+            .collect();
+        let base = [17usize, 3, 240, 99, 0, 401, 55, 312];
+        for isa in Isa::available() {
+            let (rows, gathered) = with_isa!(isa, L, M => {
+                let _ = M::madd(0.0, 0.0, 0.0);
+                let b: [usize; L] = std::array::from_fn(|l| base[l]);
+                // SAFETY: every index + 3 + 9 < 500; L bound by with_isa!.
+                let rows = unsafe { gather_rows4::<L>(&data, &b, 9) };
+                let g: [[f64; L]; 4] = std::array::from_fn(|i| unsafe { gather::<L>(&data, &b, 9 + i) });
+                (rows.iter().flatten().copied().collect::<Vec<_>>(), g.iter().flatten().copied().collect::<Vec<_>>())
+            });
+            assert_eq!(rows, gathered, "{isa:?}");
+            assert_eq!(rows[0], data[base[0] + 9]);
+        }
+    }
 
     #[test]
     fn dispatch_runs_on_this_cpu() {

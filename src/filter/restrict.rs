@@ -15,7 +15,7 @@
 use super::Field;
 use super::coeffs::Coefficient;
 use crate::roots::bernstein::MAX_DEGREE;
-use crate::simd::Madd;
+use crate::simd::{Madd, gather_rows4};
 
 const N: usize = MAX_DEGREE + 1;
 
@@ -191,11 +191,22 @@ impl<T: Coefficient> Field<T> {
             let mut bk = [[0.0f64; L]; N];
             for j in 0..S {
                 let mut ajk = [[0.0f64; L]; S];
+                let row = j * sy + k * sz;
+                // A cubic's x-row is 4 contiguous coefficients: one vector
+                // load per lane and a transpose beat four gathers (same values).
+                let rows4 = match T::as_f64_slice(data) {
+                    // SAFETY: base + row + 3 < base + span <= data.len()
+                    // (asserted above); L is bound by `with_isa!`.
+                    Some(d) if S == 4 => Some(unsafe { gather_rows4::<L>(d, &seg.base, row) }),
+                    _ => None,
+                };
                 for i in 0..S {
-                    let off = j * sy + k * sz + i;
-                    // SAFETY: base + off < base + span <= data.len() (asserted
-                    // above); L is bound by `with_isa!`.
-                    let c: [f64; L] = unsafe { T::gather(data, &seg.base, off) };
+                    let c: [f64; L] = match &rows4 {
+                        Some(r) => r[i],
+                        // SAFETY: base + row + i < base + span <= data.len()
+                        // (asserted above); L is bound by `with_isa!`.
+                        None => unsafe { T::gather(data, &seg.base, row + i) },
+                    };
                     let wx = &w[0][i];
                     for m in 0..S {
                         for l in 0..L {
