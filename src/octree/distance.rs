@@ -1,141 +1,362 @@
 //! Empty-space skipping by distance: beyond the paper's octree.
 //!
-//! Each cell stores its chessboard (L∞) distance, in cells, to the nearest
-//! tagged cell (0 for a tagged cell, saturating at 255). A ray in a cell at
-//! distance `d > 0` knows the cube of radius `d - 1` around it holds no tagged
-//! cell, and jumps to where it leaves that cube in one step. The octree can
-//! only skip *aligned* blocks, which shrink to single cells next to a surface
-//! whatever the ray's direction; the distance cube is centred on the ray.
+//! A ray only ever moves *ahead*, into the octant of its direction's signs.
+//! So for each of the eight octants every cell stores the edge `k` of the
+//! largest cube of cells anchored at it and reaching ahead into that octant
+//! (`c + [0, k-1]³` with the octant's signs) that holds no tagged cell: 0 for
+//! a tagged cell, saturating at 255, cells past the lattice counting as
+//! empty. A ray in a cell with `k > 0` jumps to where it leaves that cube in
+//! one step.
 //!
-//! The field is exact: two raster passes with the full 26-neighbourhood and
-//! unit weights compute the chessboard distance transform exactly (Rosenfeld &
-//! Pfaltz 1966, in 3-D).
+//! The octree can only skip *aligned* blocks, which shrink to single cells
+//! next to a surface whatever the ray's direction; a cube centred on the ray
+//! (the chessboard distance) must stop at surfaces behind and beside it too.
+//! The octant cube ignores everything behind the ray: it holds the part of
+//! the centred cube ahead, so it is never smaller, and a ray leaving a surface
+//! sees the open space at once. Single thread, the glass sphere: 15.4 cells
+//! visited per ray with the octree, 15.6 with centred cubes, 7.4 with octant
+//! cubes.
+//!
+//! Eight maps cost a byte per cell each; beyond [`OCTANT_BUDGET`] a single
+//! centred map is built instead (one byte per cell, the exact chessboard
+//! distance transform), and the walk jumps over centred cubes.
+//!
+//! Both maps are stored in 4³ bricks ([`Bricked`]) like the octree's skip map,
+//! so a ray's successive loads stay in few cache lines.
+
+use rayon::prelude::*;
 
 use crate::classify::Tags;
+use crate::lattice::Bricked;
+
+/// Largest memory the eight octant maps may take.
+pub const OCTANT_BUDGET: usize = 2 << 30;
 
 #[derive(Clone, Debug)]
 pub struct Proximity {
     cells: [usize; 3],
-    dist: Vec<u8>,
+    bricked: Bricked,
+    reach: Reach,
+}
+
+#[derive(Clone, Debug)]
+enum Reach {
+    /// Per octant (bit `a` set: negative direction along axis `a`), the edge
+    /// of the empty cube anchored at each cell reaching ahead.
+    Octants(Vec<Vec<u8>>),
+    /// Chessboard distance to the nearest tagged cell: the cube of radius
+    /// `d - 1` centred on the cell is empty.
+    Centred(Vec<u8>),
+}
+
+/// The octant of direction `du`: bit `a` set when it points down axis `a`
+/// (an axis it does not move along counts as up).
+#[inline(always)]
+pub fn octant(du: [f64; 3]) -> usize {
+    (du[0] < 0.0) as usize | ((du[1] < 0.0) as usize) << 1 | ((du[2] < 0.0) as usize) << 2
 }
 
 impl Proximity {
+    /// Octant maps of `tags` when they fit [`OCTANT_BUDGET`], else the
+    /// centred map.
     pub fn build(tags: &Tags) -> Proximity {
-        let cells = tags.cells;
-        let [nx, ny, nz] = cells;
-        let n = nx * ny * nz;
-        let mut d: Vec<u8> = (0..n)
-            .map(|i| if tags.get_index(i) { 0 } else { 255 })
-            .collect();
-        let idx = |x: usize, y: usize, z: usize| x + nx * (y + ny * z);
-        // Forward: the 13 neighbours before (x, y, z) in raster order.
-        for z in 0..nz {
-            for y in 0..ny {
-                for x in 0..nx {
-                    let i = idx(x, y, z);
-                    if d[i] == 0 {
-                        continue;
-                    }
-                    let mut m = d[i];
-                    for dz in -1i64..=0 {
-                        for dy in -1i64..=1 {
-                            for dx in -1i64..=1 {
-                                if dz == 0 && (dy > 0 || (dy == 0 && dx >= 0)) {
-                                    continue;
-                                }
-                                let (xx, yy, zz) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
-                                if xx < 0 || yy < 0 || zz < 0 || xx >= nx as i64 || yy >= ny as i64
-                                {
-                                    continue;
-                                }
-                                m = m.min(
-                                    d[idx(xx as usize, yy as usize, zz as usize)].saturating_add(1),
-                                );
-                            }
-                        }
-                    }
-                    d[i] = m;
-                }
-            }
-        }
-        // Backward: the 13 neighbours after it.
-        for z in (0..nz).rev() {
-            for y in (0..ny).rev() {
-                for x in (0..nx).rev() {
-                    let i = idx(x, y, z);
-                    if d[i] == 0 {
-                        continue;
-                    }
-                    let mut m = d[i];
-                    for dz in 0i64..=1 {
-                        for dy in -1i64..=1 {
-                            for dx in -1i64..=1 {
-                                if dz == 0 && (dy < 0 || (dy == 0 && dx <= 0)) {
-                                    continue;
-                                }
-                                let (xx, yy, zz) = (x as i64 + dx, y as i64 + dy, z as i64 + dz);
-                                if xx < 0
-                                    || yy < 0
-                                    || xx >= nx as i64
-                                    || yy >= ny as i64
-                                    || zz >= nz as i64
-                                {
-                                    continue;
-                                }
-                                m = m.min(
-                                    d[idx(xx as usize, yy as usize, zz as usize)].saturating_add(1),
-                                );
-                            }
-                        }
-                    }
-                    d[i] = m;
-                }
-            }
-        }
-        Proximity { cells, dist: d }
+        Proximity::build_within(tags, OCTANT_BUDGET)
     }
 
-    /// Chessboard distance of cell `c` (in range) to the nearest tagged cell.
+    /// [`Proximity::build`] with an explicit budget for the octant maps.
+    pub fn build_within(tags: &Tags, budget: usize) -> Proximity {
+        let bricked = Bricked::new(tags.cells);
+        let reach = if 8 * bricked.len() <= budget {
+            Reach::Octants(
+                (0..8usize)
+                    .into_par_iter()
+                    .map(|o| to_bricked(tags.cells, &octant_map(tags, o)))
+                    .collect(),
+            )
+        } else {
+            Reach::Centred(to_bricked(tags.cells, &centred_map(tags)))
+        };
+        Proximity {
+            cells: tags.cells,
+            bricked,
+            reach,
+        }
+    }
+
+    /// Whether the octant maps were built (else the centred map).
+    pub fn is_octant(&self) -> bool {
+        matches!(self.reach, Reach::Octants(_))
+    }
+
+    /// The empty box a ray in cell `c` (in range) heading into `octant` may
+    /// jump over, as the cells it reaches behind and ahead of `c` on every
+    /// axis; `None` when `c` is tagged.
     #[inline(always)]
-    pub fn get(&self, c: [i64; 3]) -> u8 {
-        self.dist[c[0] as usize + self.cells[0] * (c[1] as usize + self.cells[1] * c[2] as usize)]
+    pub fn empty_reach(&self, octant: usize, c: [i64; 3]) -> Option<(i64, i64)> {
+        let i = self.bricked.index(c);
+        match &self.reach {
+            Reach::Octants(maps) => match maps[octant][i] {
+                0 => None,
+                k => Some((0, k as i64 - 1)),
+            },
+            Reach::Centred(map) => match map[i] {
+                0 => None,
+                d => Some((d as i64 - 1, d as i64 - 1)),
+            },
+        }
+    }
+
+    pub fn cells(&self) -> [usize; 3] {
+        self.cells
     }
 
     pub fn bytes(&self) -> usize {
-        self.dist.len()
+        match &self.reach {
+            Reach::Octants(maps) => maps.iter().map(Vec::len).sum(),
+            Reach::Centred(map) => map.len(),
+        }
     }
+}
+
+/// An x-fastest map in the bricked layout.
+fn to_bricked(cells: [usize; 3], linear: &[u8]) -> Vec<u8> {
+    let bricked = Bricked::new(cells);
+    let [nx, ny, nz] = cells;
+    let mut out = vec![0u8; bricked.len()];
+    for z in 0..nz {
+        for y in 0..ny {
+            for x in 0..nx {
+                out[bricked.index([x as i64, y as i64, z as i64])] = linear[x + nx * (y + ny * z)];
+            }
+        }
+    }
+    out
+}
+
+/// The octant map for octant `o`, x-fastest.
+///
+/// The cube of edge `k` anchored at `c` is `c` and the cubes of edge `k - 1`
+/// anchored at its seven neighbours ahead, so `D(c) = 1 + min D(c + e)` over
+/// those neighbours (0 when tagged). Sweeping from the far corner, the six
+/// neighbours in the next row or slab are already final and combine as a
+/// vector along the row; only the neighbour ahead in the row is a scan.
+fn octant_map(tags: &Tags, o: usize) -> Vec<u8> {
+    let [nx, ny, nz] = tags.cells;
+    let mut d = vec![0u8; nx * ny * nz];
+    if d.is_empty() {
+        return d;
+    }
+    let neg = [o & 1 != 0, o & 2 != 0, o & 4 != 0];
+    // Visiting order along an axis: the cell ahead comes first.
+    let order = |n: usize, neg: bool| -> Vec<usize> {
+        if neg {
+            (0..n).collect()
+        } else {
+            (0..n).rev().collect()
+        }
+    };
+    let ahead = |v: usize, n: usize, neg: bool| -> Option<usize> {
+        if neg {
+            v.checked_sub(1)
+        } else {
+            (v + 1 < n).then_some(v + 1)
+        }
+    };
+    let row = |y: usize, z: usize| nx * (y + ny * z);
+    let mut g = vec![255u8; nx];
+    for &z in &order(nz, neg[2]) {
+        let za = ahead(z, nz, neg[2]);
+        for &y in &order(ny, neg[1]) {
+            let ya = ahead(y, ny, neg[1]);
+            // G(x): the three final neighbours at the same x.
+            g.fill(255);
+            let mut take = |r: usize| {
+                for (gx, &v) in g.iter_mut().zip(&d[r..r + nx]) {
+                    *gx = (*gx).min(v);
+                }
+            };
+            if let Some(ya) = ya {
+                take(row(ya, z));
+            }
+            if let Some(za) = za {
+                take(row(y, za));
+                if let Some(ya) = ya {
+                    take(row(ya, za));
+                }
+            }
+            let base = row(y, z);
+            let mut prev: Option<usize> = None;
+            for &x in &order(nx, neg[0]) {
+                // F(x) = min(G(x), G(x ahead)); then the row scan.
+                let mut m = g[x];
+                if let Some(xa) = prev {
+                    m = m.min(g[xa]).min(d[base + xa]);
+                }
+                d[base + x] = if tags.get_index(base + x) {
+                    0
+                } else {
+                    m.saturating_add(1)
+                };
+                prev = Some(x);
+            }
+        }
+    }
+    d
+}
+
+/// The chessboard distance to the nearest tagged cell, x-fastest: two raster
+/// passes with the full 26-neighbourhood and unit weights compute it exactly
+/// (Rosenfeld & Pfaltz 1966, in 3-D).
+fn centred_map(tags: &Tags) -> Vec<u8> {
+    let [nx, ny, nz] = tags.cells;
+    let n = nx * ny * nz;
+    let mut d: Vec<u8> = (0..n)
+        .map(|i| if tags.get_index(i) { 0 } else { 255 })
+        .collect();
+    let idx = |x: usize, y: usize, z: usize| x + nx * (y + ny * z);
+    for forward in [true, false] {
+        let zs: Vec<usize> = if forward {
+            (0..nz).collect()
+        } else {
+            (0..nz).rev().collect()
+        };
+        for &z in &zs {
+            for yi in 0..ny {
+                let y = if forward { yi } else { ny - 1 - yi };
+                for xi in 0..nx {
+                    let x = if forward { xi } else { nx - 1 - xi };
+                    let i = idx(x, y, z);
+                    if d[i] == 0 {
+                        continue;
+                    }
+                    let mut m = d[i];
+                    // The 13 neighbours before (x, y, z) in this pass's order.
+                    for dz in -1i64..=1 {
+                        for dy in -1i64..=1 {
+                            for dx in -1i64..=1 {
+                                let key = (dz, dy, dx);
+                                let before = if forward {
+                                    key < (0, 0, 0)
+                                } else {
+                                    key > (0, 0, 0)
+                                };
+                                if !before {
+                                    continue;
+                                }
+                                let q = [x as i64 + dx, y as i64 + dy, z as i64 + dz];
+                                if (0..3).any(|a| q[a] < 0 || q[a] >= tags.cells[a] as i64) {
+                                    continue;
+                                }
+                                let v = d[idx(q[0] as usize, q[1] as usize, q[2] as usize)];
+                                m = m.min(v.saturating_add(1));
+                            }
+                        }
+                    }
+                    d[i] = m;
+                }
+            }
+        }
+    }
+    d
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    #[test]
-    fn matches_brute_force_chessboard_distance() {
-        let cells = [9usize, 7, 8];
+    fn random_tags(cells: [usize; 3], per_mille: usize) -> (Tags, Vec<[usize; 3]>) {
         let n = cells.iter().product::<usize>();
-        let on: Vec<usize> = (0..n).filter(|i| (i * 2654435761usize) % 97 < 2).collect();
+        let on: Vec<usize> = (0..n)
+            .filter(|i| (i * 2654435761usize) % 1000 < per_mille)
+            .collect();
         let mut flags = vec![0u8; n];
         for &i in &on {
             flags[i] = 1;
         }
-        let tags = Tags::from_chunks(cells, vec![flags]);
-        let p = Proximity::build(&tags);
+        let at = |i: usize| {
+            [
+                i % cells[0],
+                i / cells[0] % cells[1],
+                i / (cells[0] * cells[1]),
+            ]
+        };
+        (
+            Tags::from_chunks(cells, vec![flags]),
+            on.into_iter().map(at).collect(),
+        )
+    }
+
+    fn each_cell(cells: [usize; 3], mut f: impl FnMut([usize; 3])) {
         for z in 0..cells[2] {
             for y in 0..cells[1] {
                 for x in 0..cells[0] {
-                    let want = on
-                        .iter()
-                        .map(|&i| {
-                            let (qx, qy, qz) = (i % 9, i / 9 % 7, i / 63);
-                            (x.abs_diff(qx)).max(y.abs_diff(qy)).max(z.abs_diff(qz))
-                        })
-                        .min()
-                        .unwrap()
-                        .min(255) as u8;
-                    assert_eq!(p.get([x as i64, y as i64, z as i64]), want, "({x},{y},{z})");
+                    f([x, y, z]);
                 }
             }
+        }
+    }
+
+    /// The cube's edge in cells (0: the cell is tagged).
+    fn edge(reach: Option<(i64, i64)>) -> usize {
+        reach.map_or(0, |(_, ahead)| ahead as usize + 1)
+    }
+
+    fn cheb(a: [usize; 3], b: [usize; 3]) -> usize {
+        (0..3).map(|k| a[k].abs_diff(b[k])).max().unwrap()
+    }
+
+    #[test]
+    fn octant_cubes_match_brute_force() {
+        // A tagged cell at chessboard distance m ahead of c (in c's octant)
+        // bounds the anchored cube's edge to m; the largest is the nearest.
+        for (cells, per_mille) in [([9usize, 7, 8], 20), ([13, 5, 6], 4), ([3, 4, 2], 0)] {
+            let (tags, on) = random_tags(cells, per_mille);
+            let p = Proximity::build(&tags);
+            assert!(p.is_octant());
+            for o in 0..8 {
+                let neg = [o & 1 != 0, o & 2 != 0, o & 4 != 0];
+                each_cell(cells, |c| {
+                    let want = on
+                        .iter()
+                        .filter(|t| {
+                            (0..3).all(|a| if neg[a] { t[a] <= c[a] } else { t[a] >= c[a] })
+                        })
+                        .map(|&t| cheb(t, c))
+                        .min()
+                        .unwrap_or(255)
+                        .min(255);
+                    let reach = p.empty_reach(o, c.map(|v| v as i64));
+                    assert!(reach.is_none_or(|(back, _)| back == 0), "only ahead");
+                    assert_eq!(edge(reach), want, "{cells:?} octant {o} cell {c:?}");
+                });
+            }
+        }
+    }
+
+    #[test]
+    fn centred_cubes_match_brute_force_chessboard_distance() {
+        let cells = [9usize, 7, 8];
+        let (tags, on) = random_tags(cells, 20);
+        let p = Proximity::build_within(&tags, 0);
+        assert!(!p.is_octant());
+        each_cell(cells, |c| {
+            let want = on.iter().map(|&t| cheb(t, c)).min().unwrap().min(255);
+            let reach = p.empty_reach(3, c.map(|v| v as i64));
+            assert!(reach.is_none_or(|(back, ahead)| back == ahead), "centred");
+            assert_eq!(edge(reach), want, "cell {c:?}");
+        });
+    }
+
+    #[test]
+    fn octant_cubes_are_never_smaller_than_centred_ones() {
+        let cells = [11usize, 10, 9];
+        let (tags, _) = random_tags(cells, 6);
+        let (oct, cen) = (Proximity::build(&tags), Proximity::build_within(&tags, 0));
+        for o in 0..8 {
+            each_cell(cells, |c| {
+                let c = c.map(|v| v as i64);
+                assert!(edge(oct.empty_reach(o, c)) >= edge(cen.empty_reach(o, c)));
+            });
         }
     }
 }

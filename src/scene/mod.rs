@@ -195,8 +195,9 @@ pub enum Traversal {
     Dda,
     /// Top-down octree over classified cells, DDA inside occupied leaves.
     Octree,
-    /// Jumps over the empty cube given by each cell's distance to the nearest
-    /// classified cell (beyond the paper).
+    /// Jumps over the largest empty cube anchored at the ray's cell and
+    /// reaching ahead in its direction's octant (beyond the paper; see
+    /// `octree::distance`).
     Distance,
 }
 
