@@ -19,13 +19,25 @@ use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
 use crate::classify::{self, Method, SubCellMasks, Tags};
-use crate::filter::coeffs::Coeffs;
+use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
 use crate::render::PrepareTimes;
-use crate::scene::{Scene, SceneError, Traversal, VolumeSource};
+use crate::scene::{Scene, SceneError, Storage, Traversal, VolumeSource};
 use crate::volume::{LoadOptions, Volume};
+
+/// Runs `$body` with `$f` bound to the `&Arc<Field<T>>` inside an
+/// [`AnyField`], whatever its storage `T`.
+#[macro_export]
+macro_rules! with_field {
+    ($any:expr, $f:ident => $body:expr) => {
+        match $any {
+            $crate::prepare::AnyField::F64($f) => $body,
+            $crate::prepare::AnyField::F32($f) => $body,
+        }
+    };
+}
 
 /// Cell classification and the skipping structures over it, for one
 /// iso-value. The distance field is built only when a traversal asks for it.
@@ -71,7 +83,7 @@ impl Accel {
     /// Bézier classification when they fit [`MASK_BUDGET`] (the paper's BMCC
     /// and ACCC are measured at their own resolution); returns them (or
     /// `None`) and the build time.
-    pub fn masks(&self, field: &Field) -> (Option<&SubCellMasks>, f64) {
+    pub fn masks(&self, field: &AnyField) -> (Option<&SubCellMasks>, f64) {
         let start = Instant::now();
         let mut built = false;
         let m = self.masks.get_or_init(|| {
@@ -79,7 +91,10 @@ impl Accel {
             let tags = self.octree.tags();
             (matches!(self.method, Method::Bezier(_))
                 && SubCellMasks::bytes_for(tags) <= MASK_BUDGET)
-                .then(|| SubCellMasks::build(field, tags, field.separating_iso(self.iso)))
+                .then(|| {
+                    let iso = field.separating_iso(self.iso);
+                    with_field!(field, f => SubCellMasks::build(f.as_ref(), tags, iso))
+                })
         });
         (
             m.as_ref(),
@@ -92,10 +107,68 @@ impl Accel {
     }
 }
 
+/// The prefiltered field in the coefficient storage the scene chose
+/// (`[render] coefficients`).
+#[derive(Clone, Debug)]
+pub enum AnyField {
+    F64(Arc<Field<f64>>),
+    F32(Arc<Field<f32>>),
+}
+
+impl AnyField {
+    /// Prefilters `vol` for `filter` into `storage`.
+    pub fn new(vol: &Volume, filter: FilterKind, storage: Storage) -> AnyField {
+        match storage {
+            Storage::F64 => AnyField::F64(Arc::new(Field::new(vol, filter))),
+            Storage::F32 => AnyField::F32(Arc::new(Field::<f32>::new_in(vol, filter))),
+        }
+    }
+
+    pub fn storage(&self) -> Storage {
+        match self {
+            AnyField::F64(_) => Storage::F64,
+            AnyField::F32(_) => Storage::F32,
+        }
+    }
+
+    /// The `f64` field, if that is the storage.
+    pub fn as_f64(&self) -> Option<&Field<f64>> {
+        match self {
+            AnyField::F64(f) => Some(f),
+            AnyField::F32(_) => None,
+        }
+    }
+
+    pub fn kind(&self) -> FilterKind {
+        with_field!(self, f => f.kind())
+    }
+
+    pub fn kernel(&self) -> &crate::filter::Kernel {
+        with_field!(self, f => f.kernel())
+    }
+
+    pub fn dims(&self) -> [usize; 3] {
+        with_field!(self, f => f.dims())
+    }
+
+    pub fn separating_iso(&self, iso: f64) -> f64 {
+        with_field!(self, f => f.separating_iso(iso))
+    }
+
+    /// Whether both are the same cached field.
+    pub fn ptr_eq(&self, other: &AnyField) -> bool {
+        match (self, other) {
+            (AnyField::F64(a), AnyField::F64(b)) => Arc::ptr_eq(a, b),
+            (AnyField::F32(a), AnyField::F32(b)) => Arc::ptr_eq(a, b),
+            _ => false,
+        }
+    }
+}
+
 /// Inputs of one frame.
 pub struct Prepared {
     pub volume: Arc<Volume>,
-    pub field: Arc<Field>,
+    pub field: AnyField,
     pub accel: Option<Arc<Accel>>,
     /// Build times of what was built for this frame (0 when cached).
     pub times: PrepareTimes,
@@ -104,8 +177,13 @@ pub struct Prepared {
 impl Prepared {
     /// Prefilters `volume` for `filter`, without acceleration structures.
     pub fn new(volume: Arc<Volume>, filter: FilterKind) -> Prepared {
+        Prepared::new_in(volume, filter, Storage::F64)
+    }
+
+    /// [`Prepared::new`] with coefficients stored as `storage`.
+    pub fn new_in(volume: Arc<Volume>, filter: FilterKind, storage: Storage) -> Prepared {
         let start = Instant::now();
-        let field = Arc::new(Field::new(&volume, filter));
+        let field = AnyField::new(&volume, filter, storage);
         Prepared {
             volume,
             field,
@@ -151,10 +229,17 @@ pub fn needs_accel(scene: &Scene) -> Option<Method> {
     }
 }
 
-fn build_accel(field: &Field, iso: f64, method: Method, tags: Option<Tags>) -> (Accel, f64, f64) {
+fn build_accel(
+    field: &AnyField,
+    iso: f64,
+    method: Method,
+    tags: Option<Tags>,
+) -> (Accel, f64, f64) {
     let start = Instant::now();
-    let tags =
-        tags.unwrap_or_else(|| classify::classify(field, field.separating_iso(iso), method).tags);
+    let tags = tags.unwrap_or_else(|| {
+        let iso = field.separating_iso(iso);
+        with_field!(field, f => classify::classify(f.as_ref(), iso, method).tags)
+    });
     let classify_s = start.elapsed().as_secs_f64();
     let start = Instant::now();
     let octree = Octree::build(tags);
@@ -176,7 +261,7 @@ fn build_accel(field: &Field, iso: f64, method: Method, tags: Option<Tags>) -> (
 pub struct Cache {
     dir: Option<PathBuf>,
     volumes: HashMap<String, (Arc<Volume>, u64)>,
-    fields: HashMap<(String, String), Arc<Field>>,
+    fields: HashMap<(String, String), AnyField>,
     accels: HashMap<(String, String, u64, String), Arc<Accel>>,
     /// Warnings about unusable disk cache files, for the caller to print.
     pub warnings: Vec<String>,
@@ -196,14 +281,25 @@ impl Cache {
         })
     }
 
-    /// Drops every volume (and the fields and acceleration structures built
-    /// from it) whose [`Cache::volume_key`] is not in `keep`: a run over many
-    /// volumes of one scene file (the scaling suite's 64³..1024³ phantoms)
-    /// then holds only the ones still to come, not all of them at once.
-    pub fn retain_volumes(&mut self, keep: &std::collections::HashSet<String>) {
-        self.volumes.retain(|k, _| keep.contains(k));
-        self.fields.retain(|(k, _), _| keep.contains(k));
-        self.accels.retain(|(k, ..), _| keep.contains(k));
+    /// Drops every field (and the acceleration structures built on it) whose
+    /// [`Cache::field_key`] is not in `keep`, and every volume no kept field
+    /// comes from: a run over many volumes of one scene file (the scaling
+    /// suite's 64³..1024³ phantoms, in two storages) then holds only the ones
+    /// still to come, not all of them at once.
+    pub fn retain(&mut self, keep: &std::collections::HashSet<(String, String)>) {
+        self.volumes.retain(|k, _| keep.iter().any(|(v, _)| v == k));
+        self.fields.retain(|k, _| keep.contains(k));
+        self.accels
+            .retain(|(v, f, ..), _| keep.contains(&(v.clone(), f.clone())));
+    }
+
+    /// Identity of a scene's field: its volume's ([`Cache::volume_key`]),
+    /// and its filter and coefficient storage.
+    pub fn field_key(scene: &Scene) -> (String, String) {
+        (
+            Cache::volume_key(scene),
+            field_key(scene.surface.filter, scene.render.coefficients),
+        )
     }
 
     /// Identity of a scene's volume: its file (canonical path, raw layout)
@@ -248,25 +344,26 @@ impl Cache {
             }
         };
         let filter = scene.surface.filter;
-        let fkey = (vkey.clone(), filter.cache_key());
+        let storage = scene.render.coefficients;
+        let fkey = (vkey.clone(), field_key(filter, storage));
         let field = match self.fields.get(&fkey) {
             Some(f) => f.clone(),
             None => {
                 let start = Instant::now();
-                let disk = self.disk_path(hash, &format!("{}.coef", filter.cache_key()));
+                let disk = self.disk_path(hash, &format!("{}.coef", fkey.1));
                 let loaded = disk
                     .as_deref()
-                    .and_then(|p| self.read_field(p, filter, &volume));
-                let f = Arc::new(match loaded {
+                    .and_then(|p| self.read_field(p, filter, storage, &volume));
+                let f = match loaded {
                     Some(f) => f,
                     None => {
-                        let f = Field::new(&volume, filter);
+                        let f = AnyField::new(&volume, filter, storage);
                         if let Some(p) = &disk {
-                            self.write_or_warn(p, |w| write_field(w, &f));
+                            self.write_or_warn(p, |w| with_field!(&f, f => write_field(w, f)));
                         }
                         f
                     }
-                });
+                };
                 times.prefilter_s = start.elapsed().as_secs_f64();
                 self.fields.insert(fkey.clone(), f.clone());
                 f
@@ -276,16 +373,12 @@ impl Cache {
             None => None,
             Some(method) => {
                 let iso = scene.surface.iso;
-                let akey = (vkey, filter.cache_key(), iso.to_bits(), method.name());
+                let akey = (vkey, fkey.1.clone(), iso.to_bits(), method.name());
                 match self.accels.get(&akey) {
                     Some(a) => Some(a.clone()),
                     None => {
-                        let name = format!(
-                            "{}-{:016x}-{}.tags",
-                            filter.cache_key(),
-                            iso.to_bits(),
-                            method.name()
-                        );
+                        let name =
+                            format!("{}-{:016x}-{}.tags", fkey.1, iso.to_bits(), method.name());
                         let disk = self.disk_path(hash, &name);
                         let lattice = Lattice::new(field.kernel(), field.dims());
                         let cached = disk.as_deref().and_then(|p| self.read_tags(p, &lattice));
@@ -330,11 +423,25 @@ impl Cache {
         }
     }
 
-    fn read_field(&mut self, path: &Path, filter: FilterKind, vol: &Volume) -> Option<Field> {
+    fn read_field(
+        &mut self,
+        path: &Path,
+        filter: FilterKind,
+        storage: Storage,
+        vol: &Volume,
+    ) -> Option<AnyField> {
         if !path.exists() {
             return None;
         }
-        match read_field(path, filter, vol.dims()) {
+        let read = match storage {
+            Storage::F64 => {
+                read_field(path, filter, vol.dims()).map(|f| AnyField::F64(Arc::new(f)))
+            }
+            Storage::F32 => {
+                read_field(path, filter, vol.dims()).map(|f| AnyField::F32(Arc::new(f)))
+            }
+        };
+        match read {
             Ok(f) => Some(f),
             Err(e) => {
                 self.warnings
@@ -369,7 +476,17 @@ fn write_u64s(w: &mut dyn Write, v: &[u64]) -> std::io::Result<()> {
     Ok(())
 }
 
-fn write_field(w: &mut dyn Write, f: &Field) -> std::io::Result<()> {
+/// Cache key of a field: the filter's, and the storage unless it is `f64`
+/// (so `f64` cache files keep their names).
+fn field_key(filter: FilterKind, storage: Storage) -> String {
+    match storage {
+        Storage::F64 => filter.cache_key(),
+        s => format!("{}-{}", filter.cache_key(), s.name()),
+    }
+}
+
+/// Coefficients are written as `f64` whatever the storage (exact for `f32`).
+fn write_field<T: Coefficient>(w: &mut dyn Write, f: &Field<T>) -> std::io::Result<()> {
     w.write_all(FIELD_MAGIC)?;
     let key = f.kind().cache_key();
     write_u64s(w, &[key.len() as u64])?;
@@ -378,7 +495,7 @@ fn write_field(w: &mut dyn Write, f: &Field) -> std::io::Result<()> {
     write_u64s(w, &[d[0] as u64, d[1] as u64, d[2] as u64])?;
     write_u64s(w, &[f.coeffs().interior().len() as u64])?;
     for v in f.coeffs().interior() {
-        w.write_all(&v.to_le_bytes())?;
+        w.write_all(&v.to_f64().to_le_bytes())?;
     }
     Ok(())
 }
@@ -399,7 +516,11 @@ fn bad(msg: &str) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidData, msg.to_string())
 }
 
-fn read_field(path: &Path, filter: FilterKind, dims: [usize; 3]) -> std::io::Result<Field> {
+fn read_field<T: Coefficient>(
+    path: &Path,
+    filter: FilterKind,
+    dims: [usize; 3],
+) -> std::io::Result<Field<T>> {
     let mut r = std::io::BufReader::new(std::fs::File::open(path)?);
     if &read_exact_vec(&mut r, 8)?[..] != FIELD_MAGIC {
         return Err(bad("not a coefficient cache file"));
@@ -434,7 +555,7 @@ fn read_field(path: &Path, filter: FilterKind, dims: [usize; 3]) -> std::io::Res
     }
     Ok(Field::from_coeffs(
         filter,
-        Coeffs::from_interior(dims, &vals, |v| *v),
+        Coeffs::from_interior(dims, &vals, |v| T::from_f64(*v)),
     ))
 }
 
@@ -497,7 +618,7 @@ mod tests {
         s2.surface.ior = 1.33;
         s2.camera.position.x += 3.0;
         let b = cache.prepare(&s2, &LoadOptions::default()).unwrap();
-        assert!(Arc::ptr_eq(&a.field, &b.field));
+        assert!(a.field.ptr_eq(&b.field));
         assert!(Arc::ptr_eq(
             a.accel.as_ref().unwrap(),
             b.accel.as_ref().unwrap()
@@ -507,19 +628,29 @@ mod tests {
         let mut s3 = s1.clone();
         s3.surface.iso = 100.0;
         let c = cache.prepare(&s3, &LoadOptions::default()).unwrap();
-        assert!(Arc::ptr_eq(&a.field, &c.field));
+        assert!(a.field.ptr_eq(&c.field));
         assert!(!Arc::ptr_eq(
             a.accel.as_ref().unwrap(),
             c.accel.as_ref().unwrap()
         ));
-        // Keeping the volume keeps everything; dropping it rebuilds all.
-        let key = Cache::volume_key(&s1);
-        cache.retain_volumes(&[key].into_iter().collect());
+        // Keeping the field keeps everything; keeping another storage's
+        // field drops this one (and its tags) but keeps the volume; keeping
+        // nothing rebuilds all.
+        let key = Cache::field_key(&s1);
+        cache.retain(&[key.clone()].into_iter().collect());
         let d = cache.prepare(&s2, &LoadOptions::default()).unwrap();
-        assert!(Arc::ptr_eq(&a.field, &d.field));
-        cache.retain_volumes(&Default::default());
+        assert!(a.field.ptr_eq(&d.field));
+        let mut narrow = s2.clone();
+        narrow.render.coefficients = Storage::F32;
+        cache.retain(&[Cache::field_key(&narrow)].into_iter().collect());
+        let f = cache.prepare(&s2, &LoadOptions::default()).unwrap();
+        assert!(!a.field.ptr_eq(&f.field) && f.times.prefilter_s > 0.0);
+        assert_eq!(f.times.load_s, 0.0, "the volume stays");
+        assert!(f.times.classify_s > 0.0, "tags of a dropped field go too");
+        cache.retain(&Default::default());
         let e = cache.prepare(&s2, &LoadOptions::default()).unwrap();
-        assert!(!Arc::ptr_eq(&a.field, &e.field) && e.times.prefilter_s > 0.0);
+        assert!(!a.field.ptr_eq(&e.field) && e.times.prefilter_s > 0.0);
+        assert!(e.times.load_s > 0.0);
     }
 
     #[test]
@@ -540,8 +671,8 @@ mod tests {
         let second = fresh.prepare(&s, &LoadOptions::default()).unwrap();
         assert!(fresh.warnings.is_empty(), "{:?}", fresh.warnings);
         assert_eq!(
-            first.field.coeffs().interior(),
-            second.field.coeffs().interior()
+            first.field.as_f64().unwrap().coeffs().interior(),
+            second.field.as_f64().unwrap().coeffs().interior()
         );
         assert_eq!(
             first.accel.as_ref().unwrap().octree.tags(),
@@ -558,8 +689,45 @@ mod tests {
         let third = broken.prepare(&s, &LoadOptions::default()).unwrap();
         assert_eq!(broken.warnings.len(), 2, "{:?}", broken.warnings);
         assert_eq!(
-            first.field.coeffs().interior(),
-            third.field.coeffs().interior()
+            first.field.as_f64().unwrap().coeffs().interior(),
+            third.field.as_f64().unwrap().coeffs().interior()
+        );
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    #[test]
+    fn f32_fields_are_cached_apart_and_round_trip_exactly() {
+        let dir = std::env::temp_dir().join(format!("snell-cache32-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&dir);
+        let mut s = scene();
+        s.render.coefficients = Storage::F32;
+        let mut cache = Cache::with_dir(&dir).unwrap();
+        let wide = cache.prepare(&scene(), &LoadOptions::default()).unwrap();
+        let narrow = cache.prepare(&s, &LoadOptions::default()).unwrap();
+        assert_eq!(narrow.field.storage(), Storage::F32);
+        assert!(
+            narrow.times.prefilter_s > 0.0,
+            "an f32 field is its own entry"
+        );
+        assert!(!narrow.field.ptr_eq(&wide.field));
+        let names: Vec<String> = std::fs::read_dir(&dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        let f32_file = names.iter().find(|n| n.ends_with("-f32.coef"));
+        assert!(f32_file.is_some(), "{names:?}");
+        assert_eq!(names.iter().filter(|n| n.ends_with(".coef")).count(), 2);
+        let mut reader = Cache::with_dir(&dir).unwrap();
+        let read = reader.prepare(&s, &LoadOptions::default()).unwrap();
+        assert!(reader.warnings.is_empty(), "{:?}", reader.warnings);
+        let coeffs = |p: &Prepared| match &p.field {
+            AnyField::F32(f) => f.coeffs().interior(),
+            AnyField::F64(_) => panic!("f64 storage"),
+        };
+        assert_eq!(coeffs(&narrow), coeffs(&read), "bitwise from disk");
+        assert_eq!(
+            narrow.accel.as_ref().unwrap().octree.tags(),
+            read.accel.as_ref().unwrap().octree.tags()
         );
         std::fs::remove_dir_all(&dir).unwrap();
     }

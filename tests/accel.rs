@@ -113,9 +113,11 @@ fn conservative_on_real_volumes() {
 }
 
 fn hits_agree(scene: &Scene, vol: Arc<Volume>, variants: &[&[&str]]) {
+    // The unclassified DDA over the scene's own coefficient storage.
+    let storage = scene.render.coefficients;
     let base = render::render(
         scene,
-        &Prepared::new(vol.clone(), scene.surface.filter),
+        &Prepared::new_in(vol.clone(), scene.surface.filter, storage),
         None,
     );
     assert_eq!(base.stats.counters.undefined, 0);
@@ -130,7 +132,9 @@ fn hits_agree(scene: &Scene, vol: Arc<Volume>, variants: &[&[&str]]) {
         .unwrap();
         s.render = parsed.render;
         let method = s.render.classify.unwrap();
-        let prep = Prepared::new(vol.clone(), s.surface.filter).with_accel(s.surface.iso, method);
+        assert_eq!(s.render.coefficients, storage, "variants keep the storage");
+        let prep = Prepared::new_in(vol.clone(), s.surface.filter, storage)
+            .with_accel(s.surface.iso, method);
         let f = render::render(&s, &prep, None);
         let mut worst = 0.0f64;
         for i in 0..f.film.u.len() {
@@ -186,6 +190,24 @@ const VARIANTS: [&[&str]; 6] = [
     ],
     &["render.traversal=distance", "render.classify=bezier"],
 ];
+
+#[test]
+fn f32_storage_renders_match_their_own_dda() {
+    // Skipping is exact whatever the storage: classification, masks and
+    // the solve all read the same f32 coefficients.
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let f32 = "render.coefficients=f32";
+    let o = ["image.width=96", "image.height=96", f32].map(String::from);
+    let variants: [&[&str]; 2] = [
+        &["render.traversal=octree", "render.classify=bezier", f32],
+        &["render.traversal=distance", "render.classify=accc", f32],
+    ];
+    for name in ["sphere.toml", "lobster.toml"] {
+        let scene = Scene::load(&dir.join(name), &o).unwrap();
+        let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
+        hits_agree(&scene, vol, &variants);
+    }
+}
 
 #[test]
 fn octree_renders_match_unclassified_dda() {

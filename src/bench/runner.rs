@@ -234,20 +234,21 @@ impl<'a> Runner<'a> {
         let mut configs: Vec<Option<ConfigResult>> = vec![None; unique.len()];
         let mut classified: HashMap<(usize, usize), ClassifyResult> = HashMap::new();
         for scene in scenes {
-            // The volumes this scene's experiments and classify rows load, in
-            // run order: before each experiment, the cache keeps only those
-            // still to come (one 1024³ phantom's structures take 17 GB).
-            let mut upcoming: Vec<(usize, String)> = Vec::new();
+            // The fields (volume, filter, storage) this scene's experiments
+            // and classify rows use, in run order: before each experiment,
+            // the cache keeps only those still to come (one 1024³ phantom's
+            // structures take 17 GB).
+            let mut upcoming: Vec<(usize, (String, String))> = Vec::new();
             for (i, (e, _)) in unique.iter().enumerate() {
                 if e.scene == scene {
-                    upcoming.push((i, volume_key(self.load(&e.scene, &e.overrides)?)));
+                    upcoming.push((i, field_key(self.load(&e.scene, &e.overrides)?)));
                 }
             }
             for &(_, _, row, _) in &classify_rows {
                 if row.scene == scene {
                     upcoming.push((
                         usize::MAX,
-                        volume_key(self.load(&row.scene, &row.overrides)?),
+                        field_key(self.load(&row.scene, &row.overrides)?),
                     ));
                 }
             }
@@ -255,12 +256,12 @@ impl<'a> Runner<'a> {
                 if e.scene != scene {
                     continue;
                 }
-                let keep: HashSet<String> = upcoming
+                let keep: HashSet<(String, String)> = upcoming
                     .iter()
                     .filter(|(j, _)| *j >= i)
                     .map(|(_, k)| k.clone())
                     .collect();
-                self.cache(scene).retain_volumes(&keep);
+                self.cache(scene).retain(&keep);
                 let what = format!("{table}: {} ({})", e.name, e.scene_label);
                 self.observer.start(&what);
                 let c = self.experiment(e, wants_quality.contains(&e.key()))?;
@@ -620,7 +621,7 @@ not per configuration"
         let iso = field.separating_iso(scene.surface.iso);
         let results: Vec<classify::Classification> = methods
             .iter()
-            .map(|&m| classify::classify(field, iso, m))
+            .map(|&m| crate::with_field!(field, f => classify::classify(f.as_ref(), iso, m)))
             .collect();
         let bmcc = results
             .iter()
@@ -700,8 +701,8 @@ fn summary_line(c: &ConfigResult) -> String {
     s
 }
 
-fn volume_key(scene: Scene) -> String {
-    Cache::volume_key(&scene)
+fn field_key(scene: Scene) -> (String, String) {
+    Cache::field_key(&scene)
 }
 
 #[cfg(test)]

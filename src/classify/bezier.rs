@@ -12,6 +12,7 @@
 //! opposite sides of the iso-value.
 
 use crate::filter::Field;
+use crate::filter::coeffs::Coefficient;
 use crate::filter::kernel::binomial;
 use crate::lattice::Lattice;
 
@@ -29,7 +30,7 @@ pub enum Verdict {
 }
 
 /// `β[i][p]`: weight polynomial `i` in the Bernstein basis of degree `S-1`.
-pub fn bernstein_weights(field: &Field) -> Vec<f64> {
+pub fn bernstein_weights<T: Coefficient>(field: &Field<T>) -> Vec<f64> {
     let kernel = field.kernel();
     let s = kernel.support();
     let d = s - 1;
@@ -47,7 +48,12 @@ pub fn bernstein_weights(field: &Field) -> Vec<f64> {
 
 /// Tensor Bernstein coefficients of `f - iso` over a cell: `β` applied
 /// along x, y and z of the cell's coefficient neighbourhood.
-pub fn cell_bernstein(field: &Field, cell: [i64; 3], iso: f64, beta: &[f64]) -> Vec<f64> {
+pub fn cell_bernstein<T: Coefficient>(
+    field: &Field<T>,
+    cell: [i64; 3],
+    iso: f64,
+    beta: &[f64],
+) -> Vec<f64> {
     let c = support_minus_iso(field, cell, iso);
     crate::with_support!(field.kernel().support(), S => {
         // m[p][i] = β[i][p]: row p of the map from coefficients to Bernstein.
@@ -269,8 +275,8 @@ pub fn decide(b: &[f64], s: usize, depth: u8, eps: f64) -> Verdict {
 /// Re-decides the cells `coarse` tagged by their Bézier hulls. With
 /// `proven_only`, keeps only cells with a proven crossing (the lower bound of
 /// the truth); otherwise keeps every cell not proven empty (conservative).
-pub fn refine(
-    field: &Field,
+pub fn refine<T: Coefficient>(
+    field: &Field<T>,
     lattice: &Lattice,
     iso: f64,
     coarse: &Tags,

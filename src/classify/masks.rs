@@ -12,6 +12,7 @@ use super::Tags;
 use super::bezier::{SubCells, bernstein_weights, cell_bernstein};
 use super::slack;
 use crate::filter::Field;
+use crate::filter::coeffs::Coefficient;
 use crate::lattice::Bricked;
 
 /// Sub-cell masks of the tagged cells of one classification.
@@ -34,7 +35,7 @@ impl SubCellMasks {
     }
 
     /// Masks of every tagged cell for the (separated) iso-value `iso`.
-    pub fn build(field: &Field, tags: &Tags, iso: f64) -> SubCellMasks {
+    pub fn build<T: Coefficient>(field: &Field<T>, tags: &Tags, iso: f64) -> SubCellMasks {
         let bricked = Bricked::new(tags.cells);
         let mut words = vec![0u64; bricked.len() / 64];
         words.par_iter_mut().enumerate().for_each(|(brick, w)| {

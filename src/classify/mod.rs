@@ -32,6 +32,7 @@ pub use masks::SubCellMasks;
 pub use tags::Tags;
 
 use crate::filter::Field;
+use crate::filter::coeffs::Coefficient;
 use crate::lattice::Lattice;
 
 /// A classification method.
@@ -113,7 +114,7 @@ pub struct Classification {
 
 /// Classifies every knot cell of `field` for the (already separated) iso-value
 /// `iso` (see [`Field::separating_iso`]), in parallel.
-pub fn classify(field: &Field, iso: f64, method: Method) -> Classification {
+pub fn classify<T: Coefficient>(field: &Field<T>, iso: f64, method: Method) -> Classification {
     let start = Instant::now();
     let lattice = Lattice::new(field.kernel(), field.dims());
     let tags = match method {
@@ -140,14 +141,14 @@ pub fn classify(field: &Field, iso: f64, method: Method) -> Classification {
 }
 
 /// Slack that keeps bounds conservative under summation rounding.
-pub(crate) fn slack(field: &Field) -> f64 {
+pub(crate) fn slack<T: Coefficient>(field: &Field<T>) -> f64 {
     1e-12 * field.max_abs_coeff().max(1.0)
 }
 
 /// The cheapest valid candidate set: BMCC for non-negative kernels (the Bézier
 /// coefficients are convex combinations of the support, so they cannot leave
 /// its range), the Lebesgue range otherwise.
-fn prefilter_candidates(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
+fn prefilter_candidates<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Tags {
     if field.kernel().is_nonnegative() {
         bmcc(field, lattice, iso)
     } else {
@@ -159,7 +160,7 @@ fn prefilter_candidates(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
 /// both sides (`> iso` and `<= iso`). For kernels with negative lobes, where
 /// that is not a bound, the support's coefficient range widened by the
 /// kernel's Lebesgue constant ([`lebesgue_range`]) takes its place.
-pub fn bmcc(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
+pub fn bmcc<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Tags {
     if !field.kernel().is_nonnegative() {
         return lebesgue_range(field, lattice, iso);
     }
@@ -175,7 +176,7 @@ pub fn bmcc(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
 /// The paper's equation (1), separably: upper and lower bounds of `f - iso`
 /// over the cell from `d = c - iso` weighted by the per-axis weight maxima `M`
 /// and minima `m` (`d >= 0` takes `M` for the upper bound, `d < 0` takes `m`).
-pub fn accc(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
+pub fn accc<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Tags {
     let kernel = field.kernel();
     if !kernel.is_nonnegative() {
         return signed_direct(field, lattice, iso);
@@ -231,7 +232,7 @@ pub fn accc(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
 /// by the kernel's Lebesgue constant `L` (separable min/max windows): since
 /// the weights sum to one, `|f - mid| <= Σ|c - mid||w| <= L·(hi - lo)/2`.
 /// Valid for any kernel; for non-negative ones `L = 1` and it is BMCC's range.
-pub fn lebesgue_range(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
+pub fn lebesgue_range<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Tags {
     let l = field.kernel().lebesgue_constant().powi(3);
     separable::per_cell(
         field,
@@ -253,7 +254,7 @@ pub fn lebesgue_range(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
 /// Signed kernels: the Lebesgue range, refined cell by cell with the
 /// signed-weight interval bound of [`CellBound`]; both are valid, so is their
 /// intersection.
-fn signed_direct(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
+fn signed_direct<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Tags {
     let coarse = lebesgue_range(field, lattice, iso);
     let b = CellBound::new(field.kernel());
     let eps = slack(field);
@@ -267,7 +268,13 @@ fn signed_direct(field: &Field, lattice: &Lattice, iso: f64) -> Tags {
 /// if some sub-cell's bound straddles the iso-value. Per-axis weight intervals
 /// over each sub-interval, multiplied as intervals, so it also holds for
 /// signed kernels.
-pub fn accc_sub(field: &Field, lattice: &Lattice, iso: f64, coarse: &Tags, n: usize) -> Tags {
+pub fn accc_sub<T: Coefficient>(
+    field: &Field<T>,
+    lattice: &Lattice,
+    iso: f64,
+    coarse: &Tags,
+    n: usize,
+) -> Tags {
     let kernel = field.kernel();
     let s = kernel.support();
     // ranges[a][j] = (lo, hi) of W_j over [a/n, (a+1)/n]
@@ -330,7 +337,11 @@ fn interval_product(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> (f64, f64) {
 }
 
 /// `c - iso` over a cell's `S³` support, x fastest.
-pub(crate) fn support_minus_iso(field: &Field, cell: [i64; 3], iso: f64) -> Vec<f64> {
+pub(crate) fn support_minus_iso<T: Coefficient>(
+    field: &Field<T>,
+    cell: [i64; 3],
+    iso: f64,
+) -> Vec<f64> {
     let coeffs = field.coeffs();
     let s = field.kernel().support();
     let lead = ((s - 1) / 2) as i64;
@@ -344,7 +355,11 @@ pub(crate) fn support_minus_iso(field: &Field, cell: [i64; 3], iso: f64) -> Vec<
     let mut out = Vec::with_capacity(s * s * s);
     for k in 0..s {
         for j in 0..s {
-            out.extend(data[base + j * sy + k * sz..][..s].iter().map(|c| c - iso));
+            out.extend(
+                data[base + j * sy + k * sz..][..s]
+                    .iter()
+                    .map(|c| c.to_f64() - iso),
+            );
         }
     }
     out

@@ -12,6 +12,7 @@ use rayon::prelude::*;
 
 use super::tags::Tags;
 use crate::filter::Field;
+use crate::filter::coeffs::Coefficient;
 use crate::lattice::Lattice;
 
 /// Bytes of intermediate values a chunk may hold.
@@ -19,7 +20,13 @@ const CHUNK_BYTES: usize = 48 << 20;
 
 /// Computes `decide(reduce_z(reduce_y(reduce_x(map(c)))))` for every cell.
 /// `reduce` receives the `S` values of one window in weight order `j`.
-pub fn per_cell<V, M, R, D>(field: &Field, lattice: &Lattice, map: M, reduce: R, decide: D) -> Tags
+pub fn per_cell<V, M, R, D, T: Coefficient>(
+    field: &Field<T>,
+    lattice: &Lattice,
+    map: M,
+    reduce: R,
+    decide: D,
+) -> Tags
 where
     V: Copy + Default + Send + Sync,
     M: Fn(f64) -> V + Sync,
@@ -56,7 +63,7 @@ where
                     let gy = ky as isize - lead;
                     let base = coeffs.offset(-lead, gy, gz);
                     for (i, r) in row.iter_mut().enumerate() {
-                        *r = map(data[base + i]);
+                        *r = map(data[base + i].to_f64());
                     }
                     let dst = &mut x[(kz * nyk + ky) * ncx..][..ncx];
                     for (cx, d) in dst.iter_mut().enumerate() {

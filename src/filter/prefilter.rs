@@ -18,6 +18,8 @@
 use std::ops::{Add, Div, Mul, Sub};
 
 use num_complex::Complex64;
+
+use super::coeffs::Coefficient;
 use rayon::prelude::*;
 
 /// One factor of the prefilter.
@@ -210,9 +212,9 @@ impl Prefilter {
 
     /// Like [`Prefilter::apply_3d`] on the `dims` block at `origin` of a larger
     /// grid with the given strides (the interior of a padded grid).
-    pub fn apply_3d_strided(
+    pub fn apply_3d_strided<T: Coefficient>(
         &self,
-        data: &mut [f64],
+        data: &mut [T],
         dims: [usize; 3],
         origin: usize,
         strides: [usize; 3],
@@ -226,10 +228,12 @@ impl Prefilter {
     }
 
     /// One pass of [`Prefilter::apply_3d_strided`]: filters every line along
-    /// `axis` (0 = x, 1 = y, 2 = z) of the `dims` block at `origin`.
-    pub fn apply_axis_strided(
+    /// `axis` (0 = x, 1 = y, 2 = z) of the `dims` block at `origin`. Lines
+    /// are filtered in `f64` whatever the storage `T`, which rounds once per
+    /// pass.
+    pub fn apply_axis_strided<T: Coefficient>(
         &self,
-        data: &mut [f64],
+        data: &mut [T],
         dims: [usize; 3],
         origin: usize,
         strides: [usize; 3],
@@ -270,7 +274,8 @@ impl Prefilter {
                         for k in 0..len {
                             for l in 0..lanes {
                                 let off = base + k * stride_a + l * stride_b;
-                                *buf.get_unchecked_mut(k * lanes + l) = *ptr.get().add(off);
+                                *buf.get_unchecked_mut(k * lanes + l) =
+                                    (*ptr.get().add(off)).to_f64();
                             }
                         }
                     }
@@ -279,7 +284,8 @@ impl Prefilter {
                         for k in 0..len {
                             for l in 0..lanes {
                                 let off = base + k * stride_a + l * stride_b;
-                                *ptr.get().add(off) = *buf.get_unchecked(k * lanes + l);
+                                *ptr.get().add(off) =
+                                    T::from_f64(*buf.get_unchecked(k * lanes + l));
                             }
                         }
                     }
@@ -298,13 +304,18 @@ struct Scratch {
 }
 
 /// A raw pointer that may cross threads; see the SAFETY note at its use.
-#[derive(Clone, Copy)]
-struct SyncPtr(*mut f64);
-unsafe impl Send for SyncPtr {}
-unsafe impl Sync for SyncPtr {}
-impl SyncPtr {
+struct SyncPtr<T>(*mut T);
+impl<T> Clone for SyncPtr<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+impl<T> Copy for SyncPtr<T> {}
+unsafe impl<T> Send for SyncPtr<T> {}
+unsafe impl<T> Sync for SyncPtr<T> {}
+impl<T> SyncPtr<T> {
     #[inline(always)]
-    fn get(self) -> *mut f64 {
+    fn get(self) -> *mut T {
         self.0
     }
 }

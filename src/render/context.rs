@@ -5,6 +5,7 @@ use glam::DVec3;
 
 use crate::classify::{CellBound, SubCellMasks};
 use crate::filter::Field;
+use crate::filter::coeffs::Coefficient;
 use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
 use crate::prepare::Prepared;
@@ -22,10 +23,11 @@ pub enum Skip<'a> {
     Distance(&'a Proximity),
 }
 
-/// Shared, read-only state of one frame.
-pub struct Ctx<'a> {
+/// Shared, read-only state of one frame, over a field whose coefficients
+/// are stored as `T`.
+pub struct Ctx<'a, T: Coefficient = f64> {
     pub scene: &'a Scene,
-    pub field: &'a Field,
+    pub field: &'a Field<T>,
     /// The scene's iso-value, nudged above rounding noise
     /// ([`Field::separating_iso`]); every side decision uses it.
     pub iso: f64,
@@ -49,9 +51,9 @@ pub struct Ctx<'a> {
     pub ior_outside: f64,
 }
 
-impl<'a> Ctx<'a> {
-    pub fn new(scene: &'a Scene, prep: &'a Prepared) -> Ctx<'a> {
-        let field: &Field = &prep.field;
+impl<'a, T: Coefficient> Ctx<'a, T> {
+    /// `field` is `prep`'s field in its storage.
+    pub fn new(scene: &'a Scene, prep: &'a Prepared, field: &'a Field<T>) -> Ctx<'a, T> {
         let spacing = prep.volume.spacing();
         let kernel = field.kernel();
         let lattice = Lattice::new(kernel, field.dims());
@@ -97,7 +99,7 @@ impl<'a> Ctx<'a> {
                 _ => Skip::Bound(CellBound::new(kernel)),
             },
             // Built on demand if `Prepared::ready_for` did not (then untimed).
-            masks: prep.accel.as_ref().and_then(|a| a.masks(field).0),
+            masks: prep.accel.as_ref().and_then(|a| a.masks(&prep.field).0),
             settings: scene.render,
             ior_inside: scene.surface.ior,
             ior_outside: scene.surface.outside_ior,

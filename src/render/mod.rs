@@ -30,6 +30,8 @@ pub use stats::{Counters, PrepareTimes, RenderStats};
 pub use trace::Trace;
 
 use crate::film::{Film, prss};
+use crate::filter::Field;
+use crate::filter::coeffs::Coefficient;
 pub use crate::prepare::Prepared;
 use crate::scene::{Scene, SceneError, Supersampling};
 use crate::volume::LoadOptions;
@@ -137,10 +139,22 @@ fn render_with(
     prep: &Prepared,
     window: Option<tile::Tile>,
     progress: Option<&AtomicUsize>,
+    trace: Option<&mut Trace>,
+) -> Frame {
+    crate::with_field!(&prep.field, f => render_field(scene, prep, f.as_ref(), window, progress, trace))
+}
+
+/// [`render_with`] over the prepared field in its storage `T`.
+fn render_field<T: Coefficient>(
+    scene: &Scene,
+    prep: &Prepared,
+    field: &Field<T>,
+    window: Option<tile::Tile>,
+    progress: Option<&AtomicUsize>,
     mut trace: Option<&mut Trace>,
 ) -> Frame {
     let traced = trace.is_some();
-    let ctx = Ctx::new(scene, prep);
+    let ctx = Ctx::new(scene, prep, field);
     let rs = &scene.render;
     let n = rs.samples;
     let first = match rs.supersampling {
@@ -276,8 +290,8 @@ fn render_with(
 }
 
 /// Traces regions in parallel; results come back in region order.
-fn trace_regions(
-    ctx: &Ctx,
+fn trace_regions<T: Coefficient>(
+    ctx: &Ctx<T>,
     regions: Vec<Region>,
     sampling: Sampling,
     progress: Option<&AtomicUsize>,
@@ -287,7 +301,7 @@ fn trace_regions(
         .into_par_iter()
         .map_init(Bump::new, |bump, region| {
             bump.reset();
-            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S>(ctx, region, sampling, bump, traced));
+            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S, _>(ctx, region, sampling, bump, traced));
             if let Some(p) = progress {
                 p.fetch_add(1, Ordering::Relaxed);
             }

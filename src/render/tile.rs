@@ -10,6 +10,7 @@ use super::packet::Rays;
 use super::stages::{entry, generate, record, refract, solve, traverse};
 use super::stats::{Counters, Stage, StageTimes};
 use super::trace::{Span, TileTrace};
+use crate::filter::coeffs::Coefficient;
 
 /// A rectangle of pixels `[x0, x1) × [y0, y1)`.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -180,8 +181,8 @@ impl Recorder {
 /// inlined: one call per tile costs nothing, and profilers get a stable
 /// anchor for a tile's work.
 #[inline(never)]
-pub fn render_tile<const S: usize>(
-    ctx: &Ctx,
+pub fn render_tile<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     region: Region,
     sampling: Sampling,
     bump: &Bump,
@@ -211,25 +212,25 @@ pub fn render_tile<const S: usize>(
     stage!(
         times,
         Stage::Entry,
-        entry::entry::<S>(ctx, &mut rays, &primary, &mut traverse_q, &mut record_q, c)
+        entry::entry::<S, _>(ctx, &mut rays, &primary, &mut traverse_q, &mut record_q, c)
     );
     while !traverse_q.is_empty() {
         stage!(
             times,
             Stage::Traverse,
-            traverse::traverse::<S>(ctx, &mut rays, &traverse_q, &mut solve_q, &mut record_q, c)
+            traverse::traverse::<S, _>(ctx, &mut rays, &traverse_q, &mut solve_q, &mut record_q, c)
         );
         traverse_q.clear();
         stage!(
             times,
             Stage::Solve,
-            solve::solve::<S>(ctx, &mut rays, &solve_q, &mut refract_q, &mut traverse_q, c)
+            solve::solve::<S, _>(ctx, &mut rays, &solve_q, &mut refract_q, &mut traverse_q, c)
         );
         solve_q.clear();
         stage!(
             times,
             Stage::Refract,
-            refract::refract::<S>(
+            refract::refract::<S, _>(
                 ctx,
                 &mut rays,
                 &refract_q,

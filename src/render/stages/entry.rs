@@ -5,12 +5,13 @@
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Queue, Rays};
 use super::{field_minus_iso, place};
+use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 use crate::roots::inside;
 use crate::scene::Traversal;
 
-pub fn entry<const S: usize>(
-    ctx: &Ctx,
+pub fn entry<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     input: &[u32],
     traverse: &mut Queue,
@@ -33,7 +34,7 @@ pub fn entry<const S: usize>(
             }
             Some((t0, t1)) => {
                 c.rays_entering += 1;
-                place::<S>(ctx, rays, i, t0, t1, c);
+                place::<S, _>(ctx, rays, i, t0, t1, c);
                 if ctx.traversal() == Traversal::Step {
                     // `place` sampled the field at this very point (the
                     // march's first sample).
@@ -52,9 +53,14 @@ pub fn entry<const S: usize>(
 /// where it entered the domain: the point the entry stage found, so deferring
 /// this evaluation changes no bit of it.
 #[inline]
-pub(crate) fn set_side<const S: usize>(ctx: &Ctx, rays: &mut Rays, i: usize, c: &mut Counters) {
+pub(crate) fn set_side<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
+    rays: &mut Rays,
+    i: usize,
+    c: &mut Counters,
+) {
     let p = rays.origin(i) + rays.t_start[i] * rays.direction(i);
-    let g = field_minus_iso::<S>(ctx, ctx.to_grid(p), c);
+    let g = field_minus_iso::<S, _>(ctx, ctx.to_grid(p), c);
     rays.inside[i] = inside(g);
     rays.side_known[i] = true;
 }

@@ -9,6 +9,7 @@
 use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
 use super::super::tile::{Region, Sampling};
+use crate::filter::coeffs::Coefficient;
 use crate::phantom::{mix64, uniform};
 
 /// Rays traced per pixel (capacity planning).
@@ -21,7 +22,13 @@ pub fn rays_per_pixel(sampling: Sampling) -> usize {
     }
 }
 
-pub fn generate(ctx: &Ctx, region: &Region, sampling: Sampling, rays: &mut Rays, out: &mut Queue) {
+pub fn generate<T: Coefficient>(
+    ctx: &Ctx<T>,
+    region: &Region,
+    sampling: Sampling,
+    rays: &mut Rays,
+    out: &mut Queue,
+) {
     let cam = &ctx.scene.camera;
     let width = ctx.scene.width;
     region.for_each_pixel(width, |px, py| {

@@ -22,6 +22,7 @@ use glam::DVec3;
 
 use super::context::Ctx;
 use super::packet::Rays;
+use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 use crate::scene::Traversal;
 
@@ -29,8 +30,8 @@ use crate::scene::Traversal;
 /// the domain box up to `t_end`): sets its cell, and for step traversal the
 /// field value there (the start of the next bracket).
 #[inline]
-pub(crate) fn place<const S: usize>(
-    ctx: &Ctx,
+pub(crate) fn place<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     i: usize,
     t: f64,
@@ -56,13 +57,17 @@ pub(crate) fn place<const S: usize>(
     ];
     rays.set_cell(i, cell);
     if ctx.traversal() == Traversal::Step {
-        rays.seg_g[0][i] = field_minus_iso::<S>(ctx, p, c);
+        rays.seg_g[0][i] = field_minus_iso::<S, _>(ctx, p, c);
     }
 }
 
 /// `f(p) - iso` at a grid point, clamped into the domain.
 #[inline]
-pub(crate) fn field_minus_iso<const S: usize>(ctx: &Ctx, p: DVec3, c: &mut Counters) -> f64 {
+pub(crate) fn field_minus_iso<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
+    p: DVec3,
+    c: &mut Counters,
+) -> f64 {
     c.kernel_evals += 1;
     let hi = ctx.field.dims().map(|n| (n - 1) as f64);
     let q = [

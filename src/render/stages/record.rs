@@ -4,9 +4,16 @@
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Rays};
 use super::super::tile::TileOut;
+use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 
-pub fn record(ctx: &Ctx, rays: &Rays, input: &[u32], out: &mut TileOut, c: &mut Counters) {
+pub fn record<T: Coefficient>(
+    ctx: &Ctx<T>,
+    rays: &Rays,
+    input: &[u32],
+    out: &mut TileOut,
+    c: &mut Counters,
+) {
     let width = ctx.scene.width;
     for &r in input {
         let i = r as usize;

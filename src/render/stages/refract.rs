@@ -11,6 +11,7 @@ use glam::DVec3;
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Queue, Rays};
 use super::place;
+use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 
 /// Result of bending a unit direction `d` at a surface with outward normal
@@ -36,8 +37,8 @@ pub fn snell(d: DVec3, n: DVec3, n1: f64, n2: f64) -> Bend {
     }
 }
 
-pub fn refract<const S: usize>(
-    ctx: &Ctx,
+pub fn refract<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     input: &[u32],
     traverse: &mut Queue,
@@ -96,7 +97,7 @@ pub fn refract<const S: usize>(
         let eps = eps_vox / ctx.to_grid(new_dir).length();
         match ctx.clip(p, new_dir, 0.0) {
             Some((_, t1)) if t1 > eps => {
-                place::<S>(ctx, rays, i, eps, t1, c);
+                place::<S, _>(ctx, rays, i, eps, t1, c);
                 traverse.push(r);
             }
             _ => {

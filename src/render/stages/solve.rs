@@ -15,6 +15,7 @@ use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
 use super::entry::set_side;
 use super::field_minus_iso;
+use crate::filter::coeffs::Coefficient;
 use crate::filter::restrict::LaneSegments;
 use crate::render::stats::Counters;
 use crate::roots::bernstein::{
@@ -25,8 +26,8 @@ use crate::scene::Traversal;
 use crate::simd::{Isa, Madd};
 use crate::with_isa;
 
-pub fn solve<const S: usize>(
-    ctx: &Ctx,
+pub fn solve<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     input: &[u32],
     refract: &mut Queue,
@@ -36,12 +37,12 @@ pub fn solve<const S: usize>(
     match ctx.traversal() {
         Traversal::Step => {
             for &r in input {
-                solve_bracket::<S>(ctx, rays, r, refract, traverse, c);
+                solve_bracket::<S, _>(ctx, rays, r, refract, traverse, c);
             }
         }
         Traversal::Dda | Traversal::Octree | Traversal::Distance => {
             let isa = Isa::current();
-            with_isa!(isa, L, M => solve_cells::<S, L, M>(ctx, rays, input, refract, traverse, c))
+            with_isa!(isa, L, M => solve_cells::<S, L, M, _>(ctx, rays, input, refract, traverse, c))
         }
     }
 }
@@ -69,8 +70,8 @@ pub fn solve<const S: usize>(
 /// and the restriction depends on the cell and the segment alone, so every
 /// traversal (DDA, octree, distance) solves a given cell identically.
 #[inline(always)]
-fn solve_cells<const S: usize, const L: usize, M: Madd>(
-    ctx: &Ctx,
+fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     input: &[u32],
     refract: &mut Queue,
@@ -114,7 +115,7 @@ fn solve_cells<const S: usize, const L: usize, M: Madd>(
             let i = r as usize;
             if span[l].2 > 1e-13 {
                 if !rays.side_known[i] {
-                    set_side::<S>(ctx, rays, i, c);
+                    set_side::<S, _>(ctx, rays, i, c);
                 }
                 single[l] = lane_single_crossing(&bern, d, l, rays.inside[i]);
             }
@@ -162,8 +163,8 @@ fn solve_cells<const S: usize, const L: usize, M: Madd>(
     }
 }
 
-fn solve_bracket<const S: usize>(
-    ctx: &Ctx,
+fn solve_bracket<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     r: u32,
     refract: &mut Queue,
@@ -180,7 +181,7 @@ fn solve_bracket<const S: usize>(
         let tol = ctx.settings.tolerance / ctx.to_grid(d).length();
         let mut evals = Counters::default();
         let root = brent::solve(
-            |t| field_minus_iso::<S>(ctx, ctx.to_grid(o + t * d), &mut evals),
+            |t| field_minus_iso::<S, _>(ctx, ctx.to_grid(o + t * d), &mut evals),
             ta,
             tb,
             ga,

@@ -12,6 +12,7 @@ use super::super::packet::{Fate, Queue, Rays};
 use super::field_minus_iso;
 use crate::classify::CellBound;
 use crate::classify::bezier::SUB;
+use crate::filter::coeffs::Coefficient;
 use crate::filter::kernel::floor_fast;
 use crate::octree::TAGGED;
 use crate::octree::distance::{Proximity, octant};
@@ -19,8 +20,8 @@ use crate::render::stats::Counters;
 use crate::roots::inside;
 use crate::scene::Traversal;
 
-pub fn traverse<const S: usize>(
-    ctx: &Ctx,
+pub fn traverse<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     input: &[u32],
     solve: &mut Queue,
@@ -30,7 +31,7 @@ pub fn traverse<const S: usize>(
     match ctx.traversal() {
         Traversal::Step => {
             for &r in input {
-                march::<S>(ctx, rays, r, solve, record, c);
+                march::<S, _>(ctx, rays, r, solve, record, c);
             }
         }
         Traversal::Dda | Traversal::Octree | Traversal::Distance => match &ctx.skip {
@@ -334,7 +335,7 @@ impl Dda {
 }
 
 #[inline(always)]
-fn in_range(ctx: &Ctx, c: [i64; 3]) -> bool {
+fn in_range<T: Coefficient>(ctx: &Ctx<T>, c: [i64; 3]) -> bool {
     let n = ctx.lattice.cells;
     (c[0] as u64) < n[0] as u64 && (c[1] as u64) < n[1] as u64 && (c[2] as u64) < n[2] as u64
 }
@@ -352,8 +353,8 @@ fn cell_ray(rays: &Rays, i: usize) -> CellRay {
 /// Cell walk over the bound alone (no classification): the incremental DDA,
 /// testing each cell's coefficient bound as it goes. Precomputed tags go
 /// through [`walk_interleaved`].
-fn walk_bound(
-    ctx: &Ctx,
+fn walk_bound<T: Coefficient>(
+    ctx: &Ctx<T>,
     bound: &CellBound,
     rays: &mut Rays,
     r: u32,
@@ -397,8 +398,8 @@ fn walk_bound(
 /// ray and the cell alone, so it is the same bits however the walk got
 /// here), or `None` when it meets none of the cell's tagged sub-cells.
 #[inline(always)]
-fn tagged_segment(
-    ctx: &Ctx,
+fn tagged_segment<T: Coefficient>(
+    ctx: &Ctx<T>,
     ray: &CellRay,
     cell: [i64; 3],
     t_start: f64,
@@ -552,7 +553,12 @@ impl Walk {
     /// holding it, unless the cell is tagged and its segment meets a tagged
     /// sub-cell.
     #[inline(always)]
-    fn step<E: EmptySpace>(&mut self, ctx: &Ctx, space: &E, c: &mut Counters) -> Step {
+    fn step<E: EmptySpace, T: Coefficient>(
+        &mut self,
+        ctx: &Ctx<T>,
+        space: &E,
+        c: &mut Counters,
+    ) -> Step {
         if self.t >= self.t_end || !in_range(ctx, self.cell) {
             return Step::Escaped;
         }
@@ -587,8 +593,8 @@ const WALKS: usize = 2;
 /// in turn, lets the core overlap the chains; a ray that finishes hands its
 /// slot to the next one in the queue. Each ray's steps are those of a walk on
 /// its own, so the results are the same bits in any order.
-fn walk_interleaved<E: EmptySpace>(
-    ctx: &Ctx,
+fn walk_interleaved<E: EmptySpace, T: Coefficient>(
+    ctx: &Ctx<T>,
     space: E,
     rays: &mut Rays,
     input: &[u32],
@@ -626,8 +632,8 @@ fn walk_interleaved<E: EmptySpace>(
 }
 
 /// Fixed-step march for `step`: samples at `t0 + k·h` until the side changes.
-fn march<const S: usize>(
-    ctx: &Ctx,
+fn march<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
     rays: &mut Rays,
     r: u32,
     solve: &mut Queue,
@@ -650,7 +656,7 @@ fn march<const S: usize>(
         }
         let t_next = (t + h).min(t_end);
         c.cells_visited += 1;
-        let g_next = field_minus_iso::<S>(ctx, ctx.to_grid(o + t_next * d), c);
+        let g_next = field_minus_iso::<S, _>(ctx, ctx.to_grid(o + t_next * d), c);
         if inside(g) != inside(g_next) {
             rays.t[i] = t;
             rays.seg_end[i] = t_next;
