@@ -244,16 +244,17 @@ pub unsafe fn gather<const L: usize>(data: &[f64], base: &[usize; L], off: usize
     std::array::from_fn(|l| unsafe { *data.get_unchecked(base[l] + off) })
 }
 
-/// Rows of four: `out[i][l] = data[base[l] + off + i]` for `i < 4`, each
-/// lane's row loaded as one 256-bit vector and the 4 × `L` block transposed
-/// in registers — the same values as four [`gather`]s, in half the time where
-/// the rows are contiguous (the x-rows of a cubic neighbourhood).
+/// Rows of four: `out[i][l] = data[base[l] + off + i]` as `f64` for
+/// `i < 4`, each lane's row loaded as one vector (`f32` rows converted) and
+/// the 4 × `L` block transposed in registers — the same values as four
+/// [`gather`]s, in half the time where the rows are contiguous (the x-rows
+/// of a cubic neighbourhood).
 ///
 /// # Safety
 /// As [`gather`], for every `base[l] + off + 3`.
 #[inline(always)]
-pub unsafe fn gather_rows4<const L: usize>(
-    data: &[f64],
+pub unsafe fn gather_rows4<T: Row4, const L: usize>(
+    data: &[T],
     base: &[usize; L],
     off: usize,
 ) -> [[f64; L]; 4] {
@@ -276,18 +277,46 @@ pub unsafe fn gather_rows4<const L: usize>(
     }
     // SAFETY: the caller guarantees the indices are in bounds.
     std::array::from_fn(|i| {
-        std::array::from_fn(|l| unsafe { *data.get_unchecked(base[l] + off + i) })
+        std::array::from_fn(|l| unsafe { *data.get_unchecked(base[l] + off + i) }.into())
     })
+}
+
+/// Storage [`gather_rows4`] reads: four contiguous values load as one
+/// vector of four `f64`.
+pub trait Row4: Copy + Into<f64> {
+    /// # Safety
+    /// `p .. p + 4` readable; the CPU has AVX.
+    #[cfg(target_arch = "x86_64")]
+    unsafe fn load4(p: *const Self) -> std::arch::x86_64::__m256d;
+}
+
+impl Row4 for f64 {
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn load4(p: *const f64) -> std::arch::x86_64::__m256d {
+        // SAFETY: forwarded from the caller.
+        unsafe { std::arch::x86_64::_mm256_loadu_pd(p) }
+    }
+}
+
+impl Row4 for f32 {
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn load4(p: *const f32) -> std::arch::x86_64::__m256d {
+        use std::arch::x86_64::{_mm_loadu_ps, _mm256_cvtps_pd};
+        // SAFETY: forwarded from the caller.
+        unsafe { _mm256_cvtps_pd(_mm_loadu_ps(p)) }
+    }
 }
 
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f")]
 #[inline]
-unsafe fn rows4x8(ptr: *const f64, idx: *const usize) -> [[f64; 8]; 4] {
+unsafe fn rows4x8<T: Row4>(ptr: *const T, idx: *const usize) -> [[f64; 8]; 4] {
     use std::arch::x86_64::*;
     // SAFETY: 8 indices at `idx`; each row `ptr + idx[l] .. + 4` in bounds.
     unsafe {
-        let row = |l: usize| _mm256_loadu_pd(ptr.add(*idx.add(l)));
+        let row = |l: usize| T::load4(ptr.add(*idx.add(l)));
         // Lanes (0, 2 | 1, 3) and (4, 6 | 5, 7) side by side, so the final
         // 128-bit shuffles put the lanes back in order.
         let pair = |lo: usize, hi: usize| {
@@ -308,11 +337,11 @@ unsafe fn rows4x8(ptr: *const f64, idx: *const usize) -> [[f64; 8]; 4] {
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx2")]
 #[inline]
-unsafe fn rows4x4(ptr: *const f64, idx: *const usize) -> [[f64; 4]; 4] {
+unsafe fn rows4x4<T: Row4>(ptr: *const T, idx: *const usize) -> [[f64; 4]; 4] {
     use std::arch::x86_64::*;
     // SAFETY: 4 indices at `idx`; each row `ptr + idx[l] .. + 4` in bounds.
     unsafe {
-        let row = |l: usize| _mm256_loadu_pd(ptr.add(*idx.add(l)));
+        let row = |l: usize| T::load4(ptr.add(*idx.add(l)));
         let (r0, r1, r2, r3) = (row(0), row(1), row(2), row(3));
         let (ac0, bd0) = (_mm256_unpacklo_pd(r0, r1), _mm256_unpackhi_pd(r0, r1));
         let (ac1, bd1) = (_mm256_unpacklo_pd(r2, r3), _mm256_unpackhi_pd(r2, r3));
@@ -415,12 +444,23 @@ mod tests {
                 let _ = M::madd(0.0, 0.0, 0.0);
                 let b: [usize; L] = std::array::from_fn(|l| base[l]);
                 // SAFETY: every index + 3 + 9 < 500; L bound by with_isa!.
-                let rows = unsafe { gather_rows4::<L>(&data, &b, 9) };
+                let rows = unsafe { gather_rows4::<f64, L>(&data, &b, 9) };
                 let g: [[f64; L]; 4] = std::array::from_fn(|i| unsafe { gather::<L>(&data, &b, 9 + i) });
                 (rows.iter().flatten().copied().collect::<Vec<_>>(), g.iter().flatten().copied().collect::<Vec<_>>())
             });
             assert_eq!(rows, gathered, "{isa:?}");
             assert_eq!(rows[0], data[base[0] + 9]);
+            // f32 rows convert exactly.
+            let narrow: Vec<f32> = data.iter().map(|&v| v as f32).collect();
+            let rows32 = with_isa!(isa, L, M => {
+                let _ = M::madd(0.0, 0.0, 0.0);
+                let b: [usize; L] = std::array::from_fn(|l| base[l]);
+                // SAFETY: as above.
+                let rows = unsafe { gather_rows4::<f32, L>(&narrow, &b, 9) };
+                rows.iter().flatten().copied().collect::<Vec<_>>()
+            });
+            let want: Vec<f64> = gathered.iter().map(|&v| v as f32 as f64).collect();
+            assert_eq!(rows32, want, "{isa:?} f32");
         }
     }
 

@@ -444,6 +444,15 @@ pub fn scaling_panels(r: &Report) -> Vec<Scaling> {
         let size = |c: usize| -> Option<f64> {
             let c = &r.configurations[c];
             match t.id.as_str() {
+                // One curve: the default f64 storage (the f32 rows sit at
+                // the same sizes and are read from the table).
+                "scaling-volume"
+                    if c.overrides
+                        .iter()
+                        .any(|o| o.starts_with("render.coefficients=")) =>
+                {
+                    None
+                }
                 "scaling-volume" => phantom_side(&c.overrides).map(|n| n as f64),
                 "scaling-image" => Some(c.settings.width as f64),
                 _ => None,

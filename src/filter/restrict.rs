@@ -15,7 +15,7 @@
 use super::Field;
 use super::coeffs::Coefficient;
 use crate::roots::bernstein::MAX_DEGREE;
-use crate::simd::{Madd, gather_rows4};
+use crate::simd::Madd;
 
 const N: usize = MAX_DEGREE + 1;
 
@@ -194,11 +194,12 @@ impl<T: Coefficient> Field<T> {
                 let row = j * sy + k * sz;
                 // A cubic's x-row is 4 contiguous coefficients: one vector
                 // load per lane and a transpose beat four gathers (same values).
-                let rows4 = match T::as_f64_slice(data) {
+                let rows4 = if S == 4 {
                     // SAFETY: base + row + 3 < base + span <= data.len()
                     // (asserted above); L is bound by `with_isa!`.
-                    Some(d) if S == 4 => Some(unsafe { gather_rows4::<L>(d, &seg.base, row) }),
-                    _ => None,
+                    unsafe { T::gather_rows4::<L>(data, &seg.base, row) }
+                } else {
+                    None
                 };
                 for i in 0..S {
                     let c: [f64; L] = match &rows4 {
