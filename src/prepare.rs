@@ -2,7 +2,7 @@
 //! built only when the scene uses it and cached.
 //!
 //! ```text
-//! volume ──▶ field (prefiltered, per filter) ──▶ tags + octree (per iso and method)
+//! volume ──▶ field (prefiltered, per filter and storage) ──▶ tags + octree (per iso and method)
 //! ```
 //!
 //! A [`Cache`] keeps each product in memory, keyed by what determines it, so
@@ -298,7 +298,7 @@ impl Cache {
     pub fn field_key(scene: &Scene) -> (String, String) {
         (
             Cache::volume_key(scene),
-            field_key(scene.surface.filter, scene.render.coefficients),
+            field_name(scene.surface.filter, scene.render.coefficients),
         )
     }
 
@@ -345,7 +345,7 @@ impl Cache {
         };
         let filter = scene.surface.filter;
         let storage = scene.render.coefficients;
-        let fkey = (vkey.clone(), field_key(filter, storage));
+        let fkey = (vkey.clone(), field_name(filter, storage));
         let field = match self.fields.get(&fkey) {
             Some(f) => f.clone(),
             None => {
@@ -476,9 +476,9 @@ fn write_u64s(w: &mut dyn Write, v: &[u64]) -> std::io::Result<()> {
     Ok(())
 }
 
-/// Cache key of a field: the filter's, and the storage unless it is `f64`
-/// (so `f64` cache files keep their names).
-fn field_key(filter: FilterKind, storage: Storage) -> String {
+/// A field's name in cache keys and files: the filter's, and the storage
+/// unless it is `f64` (so `f64` cache files keep their names).
+fn field_name(filter: FilterKind, storage: Storage) -> String {
     match storage {
         Storage::F64 => filter.cache_key(),
         s => format!("{}-{}", filter.cache_key(), s.name()),

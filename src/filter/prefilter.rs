@@ -18,9 +18,9 @@
 use std::ops::{Add, Div, Mul, Sub};
 
 use num_complex::Complex64;
+use rayon::prelude::*;
 
 use super::coeffs::Coefficient;
-use rayon::prelude::*;
 
 /// One factor of the prefilter.
 #[derive(Clone, Copy, Debug, PartialEq)]
