@@ -139,10 +139,6 @@ impl AnyField {
         }
     }
 
-    pub fn kind(&self) -> FilterKind {
-        with_field!(self, f => f.kind())
-    }
-
     pub fn kernel(&self) -> &crate::filter::Kernel {
         with_field!(self, f => f.kernel())
     }

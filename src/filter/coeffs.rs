@@ -31,8 +31,10 @@ pub fn mirror(i: isize, n: usize) -> usize {
 }
 
 /// How coefficients are stored: converted to `f64` for every computation.
+/// Rows of four load as vectors ([`crate::simd::gather_rows4`]) for every
+/// storage.
 pub trait Coefficient:
-    Copy + Default + Send + Sync + PartialEq + std::fmt::Debug + 'static
+    crate::simd::Row4 + Default + Send + Sync + PartialEq + std::fmt::Debug + 'static
 {
     const NAME: &'static str;
     fn to_f64(self) -> f64;
@@ -51,21 +53,6 @@ pub trait Coefficient:
     unsafe fn gather<const L: usize>(s: &[Self], base: &[usize; L], off: usize) -> [f64; L] {
         // SAFETY: the caller guarantees the indices are in bounds.
         std::array::from_fn(|l| unsafe { s.get_unchecked(base[l] + off) }.to_f64())
-    }
-
-    /// [`crate::simd::gather_rows4`] where the storage has it: rows of four
-    /// `s[base[l] + off + i]`, transposed to lanes.
-    ///
-    /// # Safety
-    /// As [`Coefficient::gather`], for every `base[l] + off + 3`.
-    #[inline(always)]
-    unsafe fn gather_rows4<const L: usize>(
-        s: &[Self],
-        base: &[usize; L],
-        off: usize,
-    ) -> Option<[[f64; L]; 4]> {
-        let _ = (s, base, off);
-        None
     }
 }
 
@@ -88,15 +75,6 @@ impl Coefficient for f64 {
         // SAFETY: forwarded from the caller.
         unsafe { crate::simd::gather(s, base, off) }
     }
-    #[inline(always)]
-    unsafe fn gather_rows4<const L: usize>(
-        s: &[Self],
-        base: &[usize; L],
-        off: usize,
-    ) -> Option<[[f64; L]; 4]> {
-        // SAFETY: forwarded from the caller.
-        Some(unsafe { crate::simd::gather_rows4(s, base, off) })
-    }
 }
 
 impl Coefficient for f32 {
@@ -112,15 +90,6 @@ impl Coefficient for f32 {
     #[inline(always)]
     fn as_f64_slice(_: &[Self]) -> Option<&[f64]> {
         None
-    }
-    #[inline(always)]
-    unsafe fn gather_rows4<const L: usize>(
-        s: &[Self],
-        base: &[usize; L],
-        off: usize,
-    ) -> Option<[[f64; L]; 4]> {
-        // SAFETY: forwarded from the caller.
-        Some(unsafe { crate::simd::gather_rows4(s, base, off) })
     }
 }
 

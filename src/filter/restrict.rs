@@ -194,13 +194,11 @@ impl<T: Coefficient> Field<T> {
                 let row = j * sy + k * sz;
                 // A cubic's x-row is 4 contiguous coefficients: one vector
                 // load per lane and a transpose beat four gathers (same values).
-                let rows4 = if S == 4 {
+                let rows4 = (S == 4).then(|| {
                     // SAFETY: base + row + 3 < base + span <= data.len()
                     // (asserted above); L is bound by `with_isa!`.
-                    unsafe { T::gather_rows4::<L>(data, &seg.base, row) }
-                } else {
-                    None
-                };
+                    unsafe { crate::simd::gather_rows4::<T, L>(data, &seg.base, row) }
+                });
                 for i in 0..S {
                     let c: [f64; L] = match &rows4 {
                         Some(r) => r[i],

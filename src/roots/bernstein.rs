@@ -470,12 +470,10 @@ mod tests {
         // isolation path's Brent at 1e-14, and against itself among other
         // neighbours (a frozen lane must not move while others iterate).
         let basis = BernsteinBasis::new(9);
-        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut draws = 0u64;
         let mut next = || {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            (rng >> 11) as f64 / (1u64 << 53) as f64
+            draws += 1;
+            crate::phantom::uniform(0x2545_f491_4f6c_dd1d, draws)
         };
         let mut polys = Vec::new();
         for case in 0..64 {

@@ -192,7 +192,8 @@ pub enum Storage {
     /// 8 bytes per coefficient: the renderer adds no error to the filter's.
     #[default]
     F64,
-    /// 4 bytes per coefficient: half the memory of a large volume. The
+    /// 4 bytes per coefficient: half the coefficients' memory (the 1024³
+    /// phantom's peak 13.9 → 9.7 GB, BENCHMARKS.md scaling). The
     /// prefilter runs in place, each line in `f64`, rounding to `f32` after
     /// each axis pass (within 4 `f32` ulps of the largest coefficient,
     /// tested); on the glass sphere the hits move by a median 1.5e-5

@@ -48,9 +48,8 @@ pub fn solve<const S: usize, T: Coefficient>(
 }
 
 /// Cell segments in groups of `L` lanes: the restriction of the field to each
-/// segment (straight from the cell's coefficient neighbourhood, one hardware
-/// gather per coefficient across lanes) and its Bernstein form for the whole
-/// group in SIMD. Lanes whose Bernstein coefficients change sign once hold
+/// segment (straight from the cell's coefficient neighbourhood) and its
+/// Bernstein form for the whole group in SIMD. Lanes whose Bernstein coefficients change sign once hold
 /// exactly one crossing: they are refined together by Newton
 /// ([`refine_lanes`]; single thread, sphere: 3.0 evaluations per crossing
 /// where Brent took 4.0 before its polish's uncounted Newton steps, solve

@@ -43,11 +43,7 @@ pub fn traverse<const S: usize, T: Coefficient>(
                 walk_interleaved(ctx, octree, rays, input, solve, record, c);
             }
             Skip::Distance(p) => {
-                let cubes = DistanceCubes {
-                    p,
-                    last: p.cells().map(|n| n as i64 - 1),
-                };
-                walk_interleaved(ctx, cubes, rays, input, solve, record, c);
+                walk_interleaved(ctx, DistanceCubes::new(p), rays, input, solve, record, c);
             }
             Skip::Bound(b) => {
                 for &r in input {
@@ -474,6 +470,15 @@ struct DistanceCubes<'a> {
     last: [i64; 3],
 }
 
+impl<'a> DistanceCubes<'a> {
+    fn new(p: &'a Proximity) -> DistanceCubes<'a> {
+        DistanceCubes {
+            p,
+            last: p.cells().map(|n| n as i64 - 1),
+        }
+    }
+}
+
 impl EmptySpace for DistanceCubes<'_> {
     /// Cells the cube reaches behind and ahead of the cell, on every axis.
     type Reach = (i64, i64);
@@ -771,20 +776,15 @@ mod tests {
         let tagged = |c: [i64; 3]| {
             flags[c[0] as usize + cells[0] * (c[1] as usize + cells[1] * c[2] as usize)] == 1
         };
-        let mut rng = 99u64;
+        let mut draws = 0u64;
         let mut next = || {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            (rng >> 11) as f64 / (1u64 << 53) as f64
+            draws += 1;
+            crate::phantom::uniform(99, draws)
         };
         for budget in [usize::MAX, 0] {
             let p = Proximity::build_within(&tags, budget);
             assert_eq!(p.is_octant(), budget > 0);
-            let cubes = DistanceCubes {
-                p: &p,
-                last: n.map(|v| v - 1),
-            };
+            let cubes = DistanceCubes::new(&p);
             let (mut met, mut stepped, mut jumped_visits) = (0, 0, 0);
             for k in 0..3000 {
                 let ou: [f64; 3] = std::array::from_fn(|a| next() * cells[a] as f64);
