@@ -18,13 +18,13 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use crate::classify::{self, Method, SubCellMasks, Tags};
+use crate::classify::{self, CurvatureBounds, Method, SubCellMasks, TaggedIndex, Tags, curvature};
 use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
 use crate::render::PrepareTimes;
-use crate::scene::{Scene, SceneError, Storage, Traversal, VolumeSource};
+use crate::scene::{RenderSettings, Scene, SceneError, Storage, Traversal, VolumeSource};
 use crate::volume::{LoadOptions, Volume};
 
 /// Runs `$body` with `$f` bound to the `&Arc<Field<T>>` inside an
@@ -47,31 +47,40 @@ pub struct Accel {
     pub iso: f64,
     pub octree: Octree,
     proximity: OnceLock<Proximity>,
+    tagged: OnceLock<Arc<TaggedIndex>>,
     masks: OnceLock<Option<SubCellMasks>>,
+    curvature: OnceLock<Option<CurvatureBounds>>,
 }
 
-/// Largest memory the sub-cell masks may take (they are an optimisation:
-/// without them every tagged cell's segment is solved).
-pub const MASK_BUDGET: usize = 2 << 30;
+/// Largest memory each per-tagged-cell table (with its share of the index)
+/// may take: they are optimisations — without masks every tagged cell's
+/// segment is solved, without curvature bounds every crossing cell's rest.
+pub const TABLE_BUDGET: usize = 2 << 30;
+
+/// Runs `build` once into `cell`; returns the value and the build time (0
+/// when it already existed).
+fn timed_once<V>(cell: &OnceLock<V>, build: impl FnOnce() -> V) -> (&V, f64) {
+    let start = Instant::now();
+    let mut built = false;
+    let v = cell.get_or_init(|| {
+        built = true;
+        build()
+    });
+    (
+        v,
+        if built {
+            start.elapsed().as_secs_f64()
+        } else {
+            0.0
+        },
+    )
+}
 
 impl Accel {
     /// The distance field, built on first use; returns it and its build time
     /// (0 when it already existed).
     pub fn proximity(&self) -> (&Proximity, f64) {
-        let start = Instant::now();
-        let mut built = false;
-        let p = self.proximity.get_or_init(|| {
-            built = true;
-            Proximity::build(self.octree.tags())
-        });
-        (
-            p,
-            if built {
-                start.elapsed().as_secs_f64()
-            } else {
-                0.0
-            },
-        )
+        timed_once(&self.proximity, || Proximity::build(self.octree.tags()))
     }
 
     /// The distance field if it was built.
@@ -79,31 +88,48 @@ impl Accel {
         self.proximity.get()
     }
 
+    /// Whether a table of `bytes` over the tagged cells fits [`TABLE_BUDGET`].
+    fn table_fits(&self, bytes: usize) -> bool {
+        TaggedIndex::bytes_for(self.octree.tags()) + bytes <= TABLE_BUDGET
+    }
+
+    fn tagged(&self) -> Arc<TaggedIndex> {
+        self.tagged
+            .get_or_init(|| Arc::new(TaggedIndex::build(self.octree.tags())))
+            .clone()
+    }
+
     /// Sub-cell masks of the tagged cells, built on first use for the
-    /// Bézier classification when they fit [`MASK_BUDGET`] (the paper's BMCC
+    /// Bézier classification when they fit [`TABLE_BUDGET`] (the paper's BMCC
     /// and ACCC are measured at their own resolution); returns them (or
     /// `None`) and the build time.
     pub fn masks(&self, field: &AnyField) -> (Option<&SubCellMasks>, f64) {
-        let start = Instant::now();
-        let mut built = false;
-        let m = self.masks.get_or_init(|| {
-            built = true;
-            let tags = self.octree.tags();
+        let (m, s) = timed_once(&self.masks, || {
+            let count = self.octree.tags().count();
             (matches!(self.method, Method::Bezier(_))
-                && SubCellMasks::bytes_for(tags) <= MASK_BUDGET)
-                .then(|| {
-                    let iso = field.separating_iso(self.iso);
-                    with_field!(field, f => SubCellMasks::build(f.as_ref(), tags, iso))
-                })
+                && self.table_fits(SubCellMasks::bytes_for(count)))
+            .then(|| {
+                let iso = field.separating_iso(self.iso);
+                with_field!(field, f => SubCellMasks::build(f.as_ref(), self.tagged(), iso))
+            })
         });
-        (
-            m.as_ref(),
-            if built {
-                start.elapsed().as_secs_f64()
-            } else {
-                0.0
-            },
-        )
+        (m.as_ref(), s)
+    }
+
+    /// Curvature bounds of the tagged cells, built on first use when the
+    /// filter has them ([`crate::classify::curvature::applies`]) and they fit
+    /// [`TABLE_BUDGET`]; returns them (or `None`) and the build time.
+    pub fn curvature(&self, field: &AnyField) -> (Option<&CurvatureBounds>, f64) {
+        let (b, s) = timed_once(&self.curvature, || {
+            let count = self.octree.tags().count();
+            let fits = self.table_fits(CurvatureBounds::bytes_for(count));
+            with_field!(field, f => {
+                (fits && curvature::applies(f.kernel()))
+                    .then(|| CurvatureBounds::build(f.as_ref(), self.tagged()))
+                    .flatten()
+            })
+        });
+        (b.as_ref(), s)
     }
 }
 
@@ -200,14 +226,20 @@ impl Prepared {
         self
     }
 
-    /// Makes sure the structures `traversal` needs exist (the distance field).
-    pub fn ready_for(&mut self, traversal: Traversal) {
+    /// Makes sure the structures a render with `render` needs exist (the
+    /// distance field, the masks and curvature bounds of the tagged cells),
+    /// with their build time in the stats.
+    pub fn ready_for(&mut self, render: &RenderSettings) {
         let Some(a) = &self.accel else { return };
+        let traversal = render.traversal;
         if traversal == Traversal::Distance {
             self.times.octree_s += a.proximity().1;
         }
         if traversal != Traversal::Step {
             self.times.octree_s += a.masks(&self.field).1;
+        }
+        if traversal != Traversal::Step && render.clear_crossing_cells {
+            self.times.octree_s += a.curvature(&self.field).1;
         }
     }
 
@@ -245,7 +277,9 @@ fn build_accel(
             iso,
             octree,
             proximity: OnceLock::new(),
+            tagged: OnceLock::new(),
             masks: OnceLock::new(),
+            curvature: OnceLock::new(),
         },
         classify_s,
         start.elapsed().as_secs_f64(),
@@ -398,7 +432,7 @@ impl Cache {
             accel,
             times,
         };
-        p.ready_for(scene.render.traversal);
+        p.ready_for(&scene.render);
         Ok(p)
     }
 

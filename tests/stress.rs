@@ -55,7 +55,7 @@ fn render(scene: &Scene, vol: Option<Volume>) -> Frame {
     let mut prep = Prepared::new(Arc::new(vol), scene.surface.filter);
     if let Some(method) = snell::prepare::needs_accel(scene) {
         prep = prep.with_accel(scene.surface.iso, method);
-        prep.ready_for(scene.render.traversal);
+        prep.ready_for(&scene.render);
     }
     let f = render::render(scene, &prep, None);
     let c = &f.stats.counters;

@@ -2,102 +2,57 @@
 //! Bézier hull keeps ([`SubCells`]), so the traversal hands the solve stage
 //! only segments that meet one.
 //!
-//! Only tagged cells get a mask (8 bytes each); a rank structure over the tag
-//! bitset (prefix popcounts per 64-bit word, in 4³ bricks) maps a cell to its
-//! mask in O(1), and masks of nearby cells sit together.
+//! Only tagged cells get a mask (8 bytes each, in [`TaggedIndex`] slots).
 
-use rayon::prelude::*;
+use std::sync::Arc;
 
-use super::Tags;
 use super::bezier::{SubCells, bernstein_weights, cell_bernstein};
 use super::slack;
+use super::tagged::TaggedIndex;
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
-use crate::lattice::Bricked;
 
 /// Sub-cell masks of the tagged cells of one classification.
 #[derive(Clone, Debug)]
 pub struct SubCellMasks {
-    bricked: Bricked,
-    /// Tagged cells before each word of `words`.
-    rank: Vec<u32>,
-    /// The tag bitset, one word per 4³ brick.
-    words: Vec<u64>,
-    /// Per tagged cell, in brick order: the 4³ sub-cells that can hold the
+    index: Arc<TaggedIndex>,
+    /// Per tagged cell, in slot order: the 4³ sub-cells that can hold the
     /// iso-surface.
     masks: Vec<u64>,
 }
 
 impl SubCellMasks {
-    /// Bytes the masks of `tags` take (to check a memory budget first).
-    pub fn bytes_for(tags: &Tags) -> usize {
-        tags.count() * 8 + Bricked::new(tags.cells).len() / 64 * 12
+    /// Bytes the masks of `count` tagged cells take (to check a memory
+    /// budget first).
+    pub fn bytes_for(count: usize) -> usize {
+        count * 8
     }
 
-    /// Masks of every tagged cell for the (separated) iso-value `iso`.
-    pub fn build<T: Coefficient>(field: &Field<T>, tags: &Tags, iso: f64) -> SubCellMasks {
-        let bricked = Bricked::new(tags.cells);
-        let mut words = vec![0u64; bricked.len() / 64];
-        words.par_iter_mut().enumerate().for_each(|(brick, w)| {
-            for k in 0..64 {
-                let c = bricked.cell(brick * 64 + k);
-                if (0..3).all(|a| c[a] < tags.cells[a]) && tags.get(c.map(|v| v as i64)) {
-                    *w |= 1 << k;
-                }
-            }
-        });
-        let mut rank = Vec::with_capacity(words.len());
-        let mut acc = 0u32;
-        for w in &words {
-            rank.push(acc);
-            acc += w.count_ones();
-        }
-        // Tagged cells in slot order (brick by brick).
-        let cells: Vec<usize> = words
-            .iter()
-            .enumerate()
-            .flat_map(|(brick, &w)| {
-                (0..64)
-                    .filter(move |k| w >> k & 1 == 1)
-                    .map(move |k| brick * 64 + k)
-            })
-            .collect();
+    /// Masks of every tagged cell of `index` for the (separated) iso-value
+    /// `iso`.
+    pub fn build<T: Coefficient>(
+        field: &Field<T>,
+        index: Arc<TaggedIndex>,
+        iso: f64,
+    ) -> SubCellMasks {
         let s = field.kernel().support();
         let beta = bernstein_weights(field);
         let eps = slack(field);
-        let masks = cells
-            .par_iter()
-            .map_init(
-                || SubCells::new(s),
-                |sub, &slot| {
-                    let cell = bricked.cell(slot).map(|v| v as i64);
-                    sub.mask(&cell_bernstein(field, cell, iso, &beta), eps)
-                },
-            )
-            .collect();
-        SubCellMasks {
-            bricked,
-            rank,
-            words,
-            masks,
-        }
+        let masks = index.table_init(
+            || SubCells::new(s),
+            |sub, cell| sub.mask(&cell_bernstein(field, cell, iso, &beta), eps),
+        );
+        SubCellMasks { index, masks }
     }
 
     /// The mask of cell `c` (in range); `None` when the cell is not tagged.
     #[inline(always)]
     pub fn get(&self, c: [i64; 3]) -> Option<u64> {
-        let i = self.bricked.index(c);
-        let (w, b) = (i >> 6, i & 63);
-        let word = self.words[w];
-        if (word >> b) & 1 == 0 {
-            return None;
-        }
-        let slot = self.rank[w] as usize + (word & ((1u64 << b) - 1)).count_ones() as usize;
-        Some(self.masks[slot])
+        self.index.slot(c).map(|s| self.masks[s])
     }
 
     pub fn bytes(&self) -> usize {
-        self.masks.len() * 8 + self.rank.len() * 4 + self.words.len() * 8
+        self.masks.len() * 8
     }
 }
 
@@ -118,7 +73,7 @@ mod tests {
         let f = Field::new(&vol, FilterKind::BSpline(3));
         let iso = f.separating_iso(120.0);
         let tags = classify(&f, iso, Method::Bezier(2)).tags;
-        let m = SubCellMasks::build(&f, &tags, iso);
+        let m = SubCellMasks::build(&f, Arc::new(TaggedIndex::build(&tags)), iso);
         let beta = bernstein_weights(&f);
         let mut sub = SubCells::new(4);
         let mut seen = 0;

@@ -19,8 +19,10 @@
 
 pub mod bezier;
 pub mod bound;
+pub mod curvature;
 pub mod masks;
 mod separable;
+pub mod tagged;
 pub mod tags;
 
 use std::time::Instant;
@@ -28,7 +30,9 @@ use std::time::Instant;
 use rayon::prelude::*;
 
 pub use bound::CellBound;
+pub use curvature::CurvatureBounds;
 pub use masks::SubCellMasks;
+pub use tagged::TaggedIndex;
 pub use tags::Tags;
 
 use crate::filter::Field;

@@ -3,7 +3,7 @@
 
 use glam::DVec3;
 
-use crate::classify::{CellBound, SubCellMasks};
+use crate::classify::{CellBound, CurvatureBounds, SubCellMasks};
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 use crate::lattice::Lattice;
@@ -45,6 +45,9 @@ pub struct Ctx<'a, T: Coefficient = f64> {
     pub skip: Skip<'a>,
     /// Sub-cell masks of the tagged cells (Bézier classification).
     pub masks: Option<&'a SubCellMasks>,
+    /// Second-derivative bounds of the tagged cells (B-splines of degree ≥ 2),
+    /// when `clear_crossing_cells` is on.
+    pub curvature: Option<&'a CurvatureBounds>,
     pub settings: RenderSettings,
     /// Indices of refraction inside and outside the object.
     pub ior_inside: f64,
@@ -100,6 +103,11 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
             },
             // Built on demand if `Prepared::ready_for` did not (then untimed).
             masks: prep.accel.as_ref().and_then(|a| a.masks(&prep.field).0),
+            curvature: match scene.render.traversal {
+                Traversal::Step => None,
+                _ if !scene.render.clear_crossing_cells => None,
+                _ => prep.accel.as_ref().and_then(|a| a.curvature(&prep.field).0),
+            },
             settings: scene.render,
             ior_inside: scene.surface.ior,
             ior_outside: scene.surface.outside_ior,

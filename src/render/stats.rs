@@ -60,6 +60,10 @@ pub struct Counters {
     /// Tagged cells passed without a solve: the ray meets none of their
     /// tagged sub-cells ([`crate::classify::bezier::SubCells`]).
     pub subcell_skips: u64,
+    /// Cells a ray leaving a crossing starts in, passed without a solve: the
+    /// curvature bound proves the rest of the cell holds no crossing
+    /// ([`crate::classify::curvature`]).
+    pub cells_cleared: u64,
     /// Cells whose crossing problem was solved (restriction built and isolated).
     pub cells_solved: u64,
     /// Solved cells that held the crossing the ray took.
@@ -92,6 +96,7 @@ impl Counters {
         self.rays_entering += o.rays_entering;
         self.cells_visited += o.cells_visited;
         self.subcell_skips += o.subcell_skips;
+        self.cells_cleared += o.cells_cleared;
         self.cells_solved += o.cells_solved;
         self.cells_with_crossing += o.cells_with_crossing;
         self.kernel_evals += o.kernel_evals;
@@ -223,10 +228,11 @@ impl RenderStats {
             ));
         }
         s.push_str(&format!(
-            "per ray: {:.2} cells visited, {:.2} solved ({:.0}% held a crossing), {:.2} kernel evals, {:.2} root-refinement evaluations\n",
+            "per ray: {:.2} cells visited, {:.2} solved ({:.0}% held a crossing), {:.2} cleared by curvature, {:.2} kernel evals, {:.2} root-refinement evaluations\n",
             c.cells_visited as f64 / rays,
             c.cells_solved as f64 / rays,
             100.0 * c.cells_with_crossing as f64 / c.cells_solved.max(1) as f64,
+            c.cells_cleared as f64 / rays,
             c.kernel_evals as f64 / rays,
             c.brent_iters as f64 / rays,
         ));

@@ -11,8 +11,12 @@ use glam::DVec3;
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Queue, Rays};
 use super::place;
+use super::traverse::{CellRay, cell_ray, cell_span, exit_box};
+use crate::classify::CurvatureBounds;
+use crate::classify::curvature;
 use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
+use crate::simd::prefetch;
 
 /// Result of bending a unit direction `d` at a surface with outward normal
 /// `n`, going from index `n1` into `n2`.
@@ -48,8 +52,13 @@ pub fn refract<const S: usize, T: Coefficient>(
     let hi = ctx.field.dims().map(|n| (n - 1) as f64);
     // Restart a hair past the crossing so its root is not found again.
     let eps_vox = (10.0 * ctx.settings.tolerance).max(1e-9);
+    let mut checks = ClearChecks::default();
+    // Far above the rounding of the solve's polynomial.
+    let margin = 1e-9 * (1.0 + ctx.iso.abs());
     for &r in input {
         let i = r as usize;
+        // The cell whose solve found the crossing.
+        let crossing_cell = rays.cell_of(i);
         let d = rays.direction(i);
         let p = rays.origin(i) + rays.t[i] * d;
         let pg = ctx.to_grid(p);
@@ -59,7 +68,7 @@ pub fn refract<const S: usize, T: Coefficient>(
             pg.z.clamp(0.0, hi[2]),
         ];
         c.kernel_evals += 1;
-        let (_, grad) = ctx.field.value_grad_fast::<S>(q);
+        let (value, grad) = ctx.field.value_grad_fast::<S>(q);
         let grad_world = DVec3::from_array(grad) * ctx.inv_spacing;
         let len = grad_world.length();
         let entering = !rays.inside[i];
@@ -98,6 +107,19 @@ pub fn refract<const S: usize, T: Coefficient>(
         match ctx.clip(p, new_dir, 0.0) {
             Some((_, t1)) if t1 > eps => {
                 place::<S, _>(ctx, rays, i, eps, t1, c);
+                if let Some(bounds) = ctx.curvature
+                    && q == pg.to_array()
+                    && let Some(check) = ClearCheck::new(bounds, rays, i, crossing_cell)
+                {
+                    checks.push(ClearCheck {
+                        f0: value - ctx.iso,
+                        grad,
+                        ..check
+                    });
+                    if checks.is_full() {
+                        clear_cells(ctx, bounds, &mut checks, margin, rays, c);
+                    }
+                }
                 traverse.push(r);
             }
             _ => {
@@ -105,6 +127,242 @@ pub fn refract<const S: usize, T: Coefficient>(
                 record.push(r);
             }
         }
+    }
+    if let Some(bounds) = ctx.curvature {
+        clear_cells(ctx, bounds, &mut checks, margin, rays, c);
+    }
+}
+
+/// A ray just placed a hair past a crossing, waiting for the proof that the
+/// rest of the cell it starts in, and maybe the cells after it, hold no
+/// crossing ([`clear_cells`]).
+#[derive(Clone, Copy, Default)]
+struct ClearCheck {
+    i: usize,
+    /// The slot of the cell's curvature bound (being prefetched).
+    slot: usize,
+    /// `f - iso` and the gradient (grid units) at the crossing.
+    f0: f64,
+    grad: [f64; 3],
+}
+
+/// Checks in flight, settled a batch at a time ([`clear_cells`]).
+#[derive(Default)]
+struct ClearChecks {
+    items: [ClearCheck; 32],
+    len: usize,
+}
+
+impl ClearChecks {
+    fn push(&mut self, c: ClearCheck) {
+        self.items[self.len] = c;
+        self.len += 1;
+    }
+    fn is_full(&self) -> bool {
+        self.len == self.items.len()
+    }
+}
+
+impl ClearCheck {
+    /// A check for ray `i`, just placed a hair past the crossing its solve
+    /// found in `crossing_cell`, with the cell's bound prefetched; `None` when
+    /// the piece starts in another cell (the bound holds on closed cells
+    /// along the path from the crossing) or the cell is not tagged.
+    #[inline(always)]
+    fn new(
+        bounds: &CurvatureBounds,
+        rays: &Rays,
+        i: usize,
+        crossing_cell: [i64; 3],
+    ) -> Option<ClearCheck> {
+        let cell = rays.cell_of(i);
+        // Compared per element: an array compare loaded 16 bytes over values
+        // just stored 8 at a time, and that load stalled.
+        let moved = (0..3).fold(0, |acc, a| acc | (cell[a] ^ crossing_cell[a]));
+        if moved != 0 {
+            return None;
+        }
+        let slot = bounds.slot(cell)?;
+        prefetch(bounds.at(slot));
+        Some(ClearCheck {
+            i,
+            slot,
+            ..Default::default()
+        })
+    }
+
+    /// The clearance of the rest of the cell the new piece starts in, by the
+    /// Taylor bound of [`crate::classify::curvature`], or `None` when it does
+    /// not hold, or the slope along the new direction does not have the sign
+    /// of the ray's medium.
+    #[inline(always)]
+    fn start<T: Coefficient>(
+        &self,
+        ctx: &Ctx<T>,
+        bounds: &CurvatureBounds,
+        rays: &Rays,
+        margin: f64,
+    ) -> Option<Clearing> {
+        let i = self.i;
+        let ray = cell_ray(rays, i);
+        let slope: f64 = (0..3).map(|a| self.grad[a] * ray.du[a]).sum();
+        // Inside the object means `f > iso`: leaving the crossing into it,
+        // `f` must grow.
+        if slope == 0.0 || (slope > 0.0) != rays.inside[i] {
+            return None;
+        }
+        let cell = rays.cell_of(i);
+        let t_end = rays.t_end[i];
+        let mut c = Clearing {
+            i,
+            ray,
+            cell,
+            t1: cell_span(&ray, cell).1.min(t_end),
+            n: 1,
+            t0: rays.t[i],
+            t_end,
+            slope: slope.abs(),
+            f0: self.f0.abs(),
+            m: curvature::along(bounds.at(self.slot), ray.du),
+            next: None,
+        };
+        if !(c.t0 < c.t1 && c.clear(c.m, c.t1, margin)) {
+            return None;
+        }
+        c.look_ahead(ctx, bounds);
+        Some(c)
+    }
+}
+
+/// A clearance in progress: the ray's piece, the Taylor bound's terms, the
+/// last cell it cleared, and the next one.
+#[derive(Clone, Copy)]
+struct Clearing {
+    i: usize,
+    ray: CellRay,
+    /// The last cleared cell and its segment's end.
+    cell: [i64; 3],
+    t1: f64,
+    /// Cells cleared so far.
+    n: usize,
+    t0: f64,
+    t_end: f64,
+    slope: f64,
+    f0: f64,
+    /// The largest `|f''|` bound along the path so far.
+    m: f64,
+    /// The cell the traversal would visit next and the slot of its bound
+    /// (being prefetched), if it is tagged: an untagged cell holds no
+    /// crossing but has no bound to carry the argument past it.
+    next: Option<([i64; 3], usize)>,
+}
+
+impl Clearing {
+    /// Whether `|f(s)| ≥ slope·s − |f0| − m s²/2`, concave in `s`, stays
+    /// above `margin` on `[t0, t1]`: positive at both ends.
+    #[inline(always)]
+    fn clear(&self, m: f64, t1: f64, margin: f64) -> bool {
+        let q = |s: f64| self.slope * s - self.f0 - 0.5 * m * s * s;
+        q(self.t0) > margin && q(t1) > margin
+    }
+
+    /// Finds the next cell — where [`exit_box`] leaves the last one, as the
+    /// traversal steps through tagged cells — and prefetches its bound.
+    #[inline(always)]
+    fn look_ahead<T: Coefficient>(&mut self, ctx: &Ctx<T>, bounds: &CurvatureBounds) {
+        self.next = None;
+        if self.t1 >= self.t_end {
+            return;
+        }
+        let (_, next) = exit_box(&self.ray, self.cell, self.cell, self.cell, self.t1);
+        let n = ctx.lattice.cells;
+        if (0..3).any(|a| next[a] < 0 || next[a] >= n[a] as i64) {
+            return;
+        }
+        if let Some(slot) = bounds.slot(next) {
+            prefetch(bounds.at(slot));
+            self.next = Some((next, slot));
+        }
+    }
+
+    /// Tries to clear the next cell too, with the bound now the largest
+    /// along the path.
+    #[inline(always)]
+    fn extend<T: Coefficient>(
+        &mut self,
+        ctx: &Ctx<T>,
+        bounds: &CurvatureBounds,
+        margin: f64,
+    ) -> bool {
+        let Some((next, slot)) = self.next else {
+            return false;
+        };
+        let m = self.m.max(curvature::along(bounds.at(slot), self.ray.du));
+        let t1 = cell_span(&self.ray, next).1.min(self.t_end);
+        if !self.clear(m, t1, margin) {
+            return false;
+        }
+        (self.cell, self.t1, self.m, self.n) = (next, t1, m, self.n + 1);
+        self.look_ahead(ctx, bounds);
+        true
+    }
+
+    /// The ray steps past the cleared cells: the traversal resumes from the
+    /// last one as it would after that cell's solve (same cell, its
+    /// segment's end).
+    fn apply(&self, rays: &mut Rays, c: &mut Counters) {
+        rays.set_cell(self.i, self.cell);
+        rays.t[self.i] = self.t1;
+        rays.advance[self.i] = true;
+        c.cells_cleared += self.n as u64;
+    }
+}
+
+/// Cells past the crossing's one a check may clear. Runs end sooner: with
+/// 64, the sphere, teapot and cranium clear at most 2.7% more cells and save
+/// 0.05% more solves.
+const MAX_CLEARED: usize = 4;
+
+/// Settles the pending checks, breadth first: the crossing cells of the whole
+/// batch, then one more cell for each ray still clear, and so on. Each bound
+/// is prefetched a round (or, for crossing cells, a batch) before it is read:
+/// the bounds are scattered, and read on demand their loads were 39% of this
+/// work on the teapot.
+fn clear_cells<T: Coefficient>(
+    ctx: &Ctx<T>,
+    bounds: &CurvatureBounds,
+    checks: &mut ClearChecks,
+    margin: f64,
+    rays: &mut Rays,
+    c: &mut Counters,
+) {
+    let mut live: [Option<Clearing>; 32] = [None; 32];
+    let mut n = 0;
+    for check in &checks.items[..checks.len] {
+        if let Some(cl) = check.start(ctx, bounds, rays, margin) {
+            live[n] = Some(cl);
+            n += 1;
+        }
+    }
+    checks.len = 0;
+    for _ in 0..MAX_CLEARED {
+        let mut any = false;
+        for slot in live[..n].iter_mut() {
+            if let Some(cl) = slot {
+                if cl.extend(ctx, bounds, margin) {
+                    any = true;
+                } else {
+                    cl.apply(rays, c);
+                    *slot = None;
+                }
+            }
+        }
+        if !any {
+            break;
+        }
+    }
+    for cl in live[..n].iter().flatten() {
+        cl.apply(rays, c);
     }
 }
 

@@ -338,7 +338,7 @@ fn in_range<T: Coefficient>(ctx: &Ctx<T>, c: [i64; 3]) -> bool {
 
 /// Ray `i` in cell coordinates, from the packet's SoA columns.
 #[inline(always)]
-fn cell_ray(rays: &Rays, i: usize) -> CellRay {
+pub(crate) fn cell_ray(rays: &Rays, i: usize) -> CellRay {
     CellRay {
         ou: std::array::from_fn(|a| rays.cell_org[a][i]),
         du: std::array::from_fn(|a| rays.cell_dir[a][i]),
