@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use crate::classify::{self, CurvatureBounds, Method, SubCellMasks, TaggedIndex, Tags, curvature};
+use crate::classify::{self, CurvatureBounds, Method, SubCellMasks, TaggedIndex, Tags};
 use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
@@ -52,8 +52,8 @@ pub struct Accel {
     curvature: OnceLock<Option<CurvatureBounds>>,
 }
 
-/// Largest memory each per-tagged-cell table (with its share of the index)
-/// may take: they are optimisations — without masks every tagged cell's
+/// Largest memory each per-tagged-cell table, counted with the whole index
+/// it shares, may take: they are optimisations — without masks every tagged cell's
 /// segment is solved, without curvature bounds every crossing cell's rest.
 pub const TABLE_BUDGET: usize = 2 << 30;
 
@@ -124,8 +124,7 @@ impl Accel {
             let count = self.octree.tags().count();
             let fits = self.table_fits(CurvatureBounds::bytes_for(count));
             with_field!(field, f => {
-                (fits && curvature::applies(f.kernel()))
-                    .then(|| CurvatureBounds::build(f.as_ref(), self.tagged()))
+                fits.then(|| CurvatureBounds::build(f.as_ref(), self.tagged()))
                     .flatten()
             })
         });

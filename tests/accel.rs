@@ -330,7 +330,7 @@ traversal = "distance"
         let (c, d) = (on.stats.counters, off.stats.counters);
         let events = c.refractions + c.reflections;
         eprintln!(
-            "{name} {extra:?}: {} of {events} crossing cells cleared, solves {} -> {}",
+            "{name} {extra:?}: {} cells cleared after {events} crossings, solves {} -> {}",
             c.cells_cleared, d.cells_solved, c.cells_solved
         );
         assert_eq!(d.cells_cleared, 0);

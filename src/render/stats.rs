@@ -60,9 +60,9 @@ pub struct Counters {
     /// Tagged cells passed without a solve: the ray meets none of their
     /// tagged sub-cells ([`crate::classify::bezier::SubCells`]).
     pub subcell_skips: u64,
-    /// Cells a ray leaving a crossing starts in, passed without a solve: the
-    /// curvature bound proves the rest of the cell holds no crossing
-    /// ([`crate::classify::curvature`]).
+    /// Cells passed without a solve right after a crossing — the rest of the
+    /// one the new piece starts in and the tagged cells after it — where the
+    /// curvature bound proves them empty ([`crate::classify::curvature`]).
     pub cells_cleared: u64,
     /// Cells whose crossing problem was solved (restriction built and isolated).
     pub cells_solved: u64,

@@ -344,7 +344,7 @@ struct RenderCfg {
     /// Coefficient storage: `f64` (default) or `f32`.
     #[serde(default)]
     coefficients: Storage,
-    /// Skip a crossing cell's rest where curvature bounds prove it empty.
+    /// Skip the cells after a crossing that curvature bounds prove empty.
     #[serde(default = "default_true")]
     clear_crossing_cells: bool,
 }
@@ -457,11 +457,11 @@ pub struct RenderSettings {
     pub prss_curvature: f64,
     pub seed: u64,
     pub coefficients: Storage,
-    /// A ray leaving a crossing skips the rest of the cell it starts in when
-    /// the field's second-derivative bounds prove it holds no other crossing
-    /// (B-splines of degree ≥ 2 with precomputed tags; the solve there would
-    /// find nothing, so no output bit changes — tested). Off only to measure
-    /// what it saves.
+    /// A ray leaving a crossing skips the rest of the cell it starts in, and
+    /// the tagged cells after it, where the field's second-derivative bounds
+    /// prove they hold no other crossing (B-splines of degree ≥ 2 with
+    /// precomputed tags; the solves there would find nothing, so no output
+    /// bit changes — tested). Off only to measure what it saves.
     pub clear_crossing_cells: bool,
 }
 

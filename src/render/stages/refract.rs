@@ -53,8 +53,14 @@ pub fn refract<const S: usize, T: Coefficient>(
     // Restart a hair past the crossing so its root is not found again.
     let eps_vox = (10.0 * ctx.settings.tolerance).max(1e-9);
     let mut checks = ClearChecks::default();
-    // Far above the rounding of the solve's polynomial.
-    let margin = 1e-9 * (1.0 + ctx.iso.abs());
+    // Far above the rounding of the solve's polynomial, which scales with
+    // the largest coefficient (as `Field::separating_iso`'s nudge does).
+    let margin = 1e-9
+        * ctx
+            .iso
+            .abs()
+            .max(ctx.field.max_abs_coeff())
+            .max(f64::MIN_POSITIVE);
     for &r in input {
         let i = r as usize;
         // The cell whose solve found the crossing.
@@ -109,13 +115,10 @@ pub fn refract<const S: usize, T: Coefficient>(
                 place::<S, _>(ctx, rays, i, eps, t1, c);
                 if let Some(bounds) = ctx.curvature
                     && q == pg.to_array()
-                    && let Some(check) = ClearCheck::new(bounds, rays, i, crossing_cell)
+                    && let Some(check) =
+                        ClearCheck::new(bounds, rays, i, crossing_cell, value - ctx.iso, grad)
                 {
-                    checks.push(ClearCheck {
-                        f0: value - ctx.iso,
-                        grad,
-                        ..check
-                    });
+                    checks.push(check);
                     if checks.is_full() {
                         clear_cells(ctx, bounds, &mut checks, margin, rays, c);
                     }
@@ -146,10 +149,13 @@ struct ClearCheck {
     grad: [f64; 3],
 }
 
+/// Refractions per batch of checks.
+const BATCH: usize = 32;
+
 /// Checks in flight, settled a batch at a time ([`clear_cells`]).
 #[derive(Default)]
 struct ClearChecks {
-    items: [ClearCheck; 32],
+    items: [ClearCheck; BATCH],
     len: usize,
 }
 
@@ -165,15 +171,18 @@ impl ClearChecks {
 
 impl ClearCheck {
     /// A check for ray `i`, just placed a hair past the crossing its solve
-    /// found in `crossing_cell`, with the cell's bound prefetched; `None` when
-    /// the piece starts in another cell (the bound holds on closed cells
-    /// along the path from the crossing) or the cell is not tagged.
+    /// found in `crossing_cell` (`f - iso = f0` and gradient `grad` there, grid
+    /// units), with the cell's bound prefetched; `None` when the piece starts
+    /// in another cell (the bound holds on closed cells along the path from
+    /// the crossing) or the cell is not tagged.
     #[inline(always)]
     fn new(
         bounds: &CurvatureBounds,
         rays: &Rays,
         i: usize,
         crossing_cell: [i64; 3],
+        f0: f64,
+        grad: [f64; 3],
     ) -> Option<ClearCheck> {
         let cell = rays.cell_of(i);
         // Compared per element: an array compare loaded 16 bytes over values
@@ -184,11 +193,7 @@ impl ClearCheck {
         }
         let slot = bounds.slot(cell)?;
         prefetch(bounds.at(slot));
-        Some(ClearCheck {
-            i,
-            slot,
-            ..Default::default()
-        })
+        Some(ClearCheck { i, slot, f0, grad })
     }
 
     /// The clearance of the rest of the cell the new piece starts in, by the
@@ -258,8 +263,9 @@ struct Clearing {
 }
 
 impl Clearing {
-    /// Whether `|f(s)| ≥ slope·s − |f0| − m s²/2`, concave in `s`, stays
-    /// above `margin` on `[t0, t1]`: positive at both ends.
+    /// Whether `|f(s) - iso| ≥ slope·s − |f0| − m s²/2`, concave in `s`, stays
+    /// above `margin` on `[t0, t1]`: positive at both ends. A NaN anywhere
+    /// (an overflowed bound) clears nothing.
     #[inline(always)]
     fn clear(&self, m: f64, t1: f64, margin: f64) -> bool {
         let q = |s: f64| self.slope * s - self.f0 - 0.5 * m * s * s;
@@ -267,11 +273,12 @@ impl Clearing {
     }
 
     /// Finds the next cell — where [`exit_box`] leaves the last one, as the
-    /// traversal steps through tagged cells — and prefetches its bound.
+    /// traversal steps through tagged cells — and prefetches its bound (none
+    /// after the last extension).
     #[inline(always)]
     fn look_ahead<T: Coefficient>(&mut self, ctx: &Ctx<T>, bounds: &CurvatureBounds) {
         self.next = None;
-        if self.t1 >= self.t_end {
+        if self.t1 >= self.t_end || self.n > MAX_CLEARED {
             return;
         }
         let (_, next) = exit_box(&self.ray, self.cell, self.cell, self.cell, self.t1);
@@ -297,7 +304,13 @@ impl Clearing {
         let Some((next, slot)) = self.next else {
             return false;
         };
-        let m = self.m.max(curvature::along(bounds.at(slot), self.ray.du));
+        // `f64::max` would drop a NaN bound; keep it, so nothing is cleared.
+        let here = curvature::along(bounds.at(slot), self.ray.du);
+        let m = if here > self.m || here.is_nan() {
+            here
+        } else {
+            self.m
+        };
         let t1 = cell_span(&self.ray, next).1.min(self.t_end);
         if !self.clear(m, t1, margin) {
             return false;
@@ -336,7 +349,7 @@ fn clear_cells<T: Coefficient>(
     rays: &mut Rays,
     c: &mut Counters,
 ) {
-    let mut live: [Option<Clearing>; 32] = [None; 32];
+    let mut live: [Option<Clearing>; BATCH] = [None; BATCH];
     let mut n = 0;
     for check in &checks.items[..checks.len] {
         if let Some(cl) = check.start(ctx, bounds, rays, margin) {
