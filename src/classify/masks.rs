@@ -50,10 +50,6 @@ impl SubCellMasks {
     pub fn get(&self, c: [i64; 3]) -> Option<u64> {
         self.index.slot(c).map(|s| self.masks[s])
     }
-
-    pub fn bytes(&self) -> usize {
-        self.masks.len() * 8
-    }
 }
 
 #[cfg(test)]

@@ -212,8 +212,8 @@ impl ClearCheck {
         let ray = cell_ray(rays, i);
         let slope: f64 = (0..3).map(|a| self.grad[a] * ray.du[a]).sum();
         // Inside the object means `f > iso`: leaving the crossing into it,
-        // `f` must grow.
-        if slope == 0.0 || (slope > 0.0) != rays.inside[i] {
+        // `f` must grow. (An overflowed gradient proves nothing.)
+        if !slope.is_finite() || slope == 0.0 || (slope > 0.0) != rays.inside[i] {
             return None;
         }
         let cell = rays.cell_of(i);
