@@ -18,7 +18,7 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, OnceLock};
 use std::time::Instant;
 
-use crate::classify::{self, CurvatureBounds, Method, SubCellMasks, TaggedIndex, Tags};
+use crate::classify::{self, CurvatureBounds, Method, SubCellMasks, TaggedIndex, Tags, curvature};
 use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
@@ -123,8 +123,11 @@ impl Accel {
         let (b, s) = timed_once(&self.curvature, || {
             let count = self.octree.tags().count();
             let fits = self.table_fits(CurvatureBounds::bytes_for(count));
+            // Checked before the shared index is built for nothing (masks may
+            // not need it either).
             with_field!(field, f => {
-                fits.then(|| CurvatureBounds::build(f.as_ref(), self.tagged()))
+                (fits && curvature::applies(f.kernel()))
+                    .then(|| CurvatureBounds::build(f.as_ref(), self.tagged()))
                     .flatten()
             })
         });
@@ -237,7 +240,7 @@ impl Prepared {
         if traversal != Traversal::Step {
             self.times.octree_s += a.masks(&self.field).1;
         }
-        if traversal != Traversal::Step && render.clear_crossing_cells {
+        if render.clears_crossing_cells() {
             self.times.octree_s += a.curvature(&self.field).1;
         }
     }

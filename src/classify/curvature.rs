@@ -111,14 +111,9 @@ pub fn hessian_bound<T: Coefficient>(field: &Field<T>, cell: [i64; 3]) -> [f64; 
 /// [`hessian_bound`] for support `S` (fixed loop bounds: the build runs once
 /// per tagged cell, 380k of them on the teapot).
 fn hessian_bound_in<const S: usize, T: Coefficient>(field: &Field<T>, cell: [i64; 3]) -> [f64; 6] {
-    let lead = ((S - 1) / 2) as i64;
     let coeffs = field.coeffs();
     let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
-    let base = coeffs.offset(
-        (cell[0] - lead) as isize,
-        (cell[1] - lead) as isize,
-        (cell[2] - lead) as isize,
-    );
+    let base = field.support_offset(cell);
     let data = coeffs.data();
     // c[z][y][x] over the support.
     let mut c = [[[0.0f64; S]; S]; S];

@@ -348,12 +348,7 @@ pub(crate) fn support_minus_iso<T: Coefficient>(
 ) -> Vec<f64> {
     let coeffs = field.coeffs();
     let s = field.kernel().support();
-    let lead = ((s - 1) / 2) as i64;
-    let base = coeffs.offset(
-        (cell[0] - lead) as isize,
-        (cell[1] - lead) as isize,
-        (cell[2] - lead) as isize,
-    );
+    let base = field.support_offset(cell);
     let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
     let data = coeffs.data();
     let mut out = Vec::with_capacity(s * s * s);

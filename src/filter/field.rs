@@ -135,6 +135,19 @@ impl<T: Coefficient> Field<T> {
         self.coeffs.dims()
     }
 
+    /// Offset in [`Coeffs::data`] of the first of the `S³` coefficients whose
+    /// basis functions cover knot cell `cell` (in range; `S` the kernel's
+    /// support): its x-rows start at `+ j·stride(1) + k·stride(2)`.
+    #[inline(always)]
+    pub fn support_offset(&self, cell: [i64; 3]) -> usize {
+        let lead = ((self.kernel.support() - 1) / 2) as i64;
+        self.coeffs.offset(
+            (cell[0] - lead) as isize,
+            (cell[1] - lead) as isize,
+            (cell[2] - lead) as isize,
+        )
+    }
+
     /// Largest coefficient magnitude: the scale of rounding in evaluations.
     pub fn max_abs_coeff(&self) -> f64 {
         self.max_abs
@@ -535,15 +548,19 @@ mod tests {
         Volume::new(dims, [1.0; 3], SampleType::F32, s).unwrap()
     }
 
+    /// u8 samples without structure (a multiplicative scramble of the index).
+    fn scrambled(dims: [usize; 3]) -> Volume {
+        let s: Vec<f32> = (0..dims.iter().product::<usize>())
+            .map(|i| ((i * 7919 + 3) % 251) as f32)
+            .collect();
+        Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap()
+    }
+
     #[test]
     fn f32_storage_prefiltered_in_place_is_within_rounding() {
         // In place, each axis pass rounds to f32; from a full f64 copy, only
         // the end does. Both stay within a few f32 ulps of the f64 field.
-        let dims = [19usize, 14, 11];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 3) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = scrambled([19, 14, 11]);
         for name in ["linear", "bspline3", "bspline7", "smooth-bspline3"] {
             let kind = FilterKind::parse(name, 1.0).unwrap();
             let exact = Field::new(&vol, kind).coeffs().interior();
@@ -568,10 +585,7 @@ mod tests {
     #[test]
     fn batch_evaluation_matches_single_points() {
         let dims = [9usize, 7, 8];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 3) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = scrambled(dims);
         // 37 points: full lane groups and a short tail, inside and outside.
         let pts: Vec<[f64; 3]> = (0..37)
             .map(|k| {

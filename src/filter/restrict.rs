@@ -63,13 +63,8 @@ impl<T: Coefficient> Field<T> {
                 }
             }
         }
-        let lead = ((S - 1) / 2) as i64;
         let coeffs = self.coeffs();
-        let base = coeffs.offset(
-            (cell[0] - lead) as isize,
-            (cell[1] - lead) as isize,
-            (cell[2] - lead) as isize,
-        );
+        let base = self.support_offset(cell);
         let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
         let data = coeffs.data();
         let d1 = S - 1;
@@ -125,12 +120,7 @@ impl<T: Coefficient> Field<T> {
         p1: [f64; 3],
     ) -> (usize, [f64; 3], [f64; 3]) {
         let off = self.kernel().knot_offset();
-        let lead = ((self.kernel().support() - 1) / 2) as i64;
-        let base = self.coeffs().offset(
-            (cell[0] - lead) as isize,
-            (cell[1] - lead) as isize,
-            (cell[2] - lead) as isize,
-        );
+        let base = self.support_offset(cell);
         let tau = std::array::from_fn(|a| p0[a] + off - cell[a] as f64);
         let delta = std::array::from_fn(|a| p1[a] - p0[a]);
         (base, tau, delta)

@@ -103,10 +103,10 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
             },
             // Built on demand if `Prepared::ready_for` did not (then untimed).
             masks: prep.accel.as_ref().and_then(|a| a.masks(&prep.field).0),
-            curvature: match scene.render.traversal {
-                Traversal::Step => None,
-                _ if !scene.render.clear_crossing_cells => None,
-                _ => prep.accel.as_ref().and_then(|a| a.curvature(&prep.field).0),
+            curvature: if scene.render.clears_crossing_cells() {
+                prep.accel.as_ref().and_then(|a| a.curvature(&prep.field).0)
+            } else {
+                None
             },
             settings: scene.render,
             ior_inside: scene.surface.ior,

@@ -465,6 +465,14 @@ pub struct RenderSettings {
     pub clear_crossing_cells: bool,
 }
 
+impl RenderSettings {
+    /// Whether renders clear crossing cells: a cell traversal with
+    /// `clear_crossing_cells` on (the bounds exist only with precomputed tags).
+    pub fn clears_crossing_cells(&self) -> bool {
+        self.traversal != Traversal::Step && self.clear_crossing_cells
+    }
+}
+
 /// A scene ready to render (the volume is loaded separately, so caches can
 /// share it across scenes).
 #[derive(Clone, Debug)]

@@ -11,7 +11,7 @@ use glam::DVec3;
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Queue, Rays};
 use super::place;
-use super::traverse::{CellRay, cell_ray, cell_span, exit_box};
+use super::traverse::{CellRay, cell_ray, cell_span, exit_box, in_range};
 use crate::classify::CurvatureBounds;
 use crate::classify::curvature;
 use crate::filter::coeffs::Coefficient;
@@ -282,8 +282,7 @@ impl Clearing {
             return;
         }
         let (_, next) = exit_box(&self.ray, self.cell, self.cell, self.cell, self.t1);
-        let n = ctx.lattice.cells;
-        if (0..3).any(|a| next[a] < 0 || next[a] >= n[a] as i64) {
+        if !in_range(ctx, next) {
             return;
         }
         if let Some(slot) = bounds.slot(next) {

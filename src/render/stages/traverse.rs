@@ -330,8 +330,9 @@ impl Dda {
     }
 }
 
+/// Whether cell `c` is in the lattice.
 #[inline(always)]
-fn in_range<T: Coefficient>(ctx: &Ctx<T>, c: [i64; 3]) -> bool {
+pub(crate) fn in_range<T: Coefficient>(ctx: &Ctx<T>, c: [i64; 3]) -> bool {
     let n = ctx.lattice.cells;
     (c[0] as u64) < n[0] as u64 && (c[1] as u64) < n[1] as u64 && (c[2] as u64) < n[2] as u64
 }
