@@ -227,10 +227,19 @@ fn cols(r: &[[f64; 2]; 5], wx: &[f64; 5]) -> [f64; 2] {
 }
 
 /// The ring-1 neighbours of a pixel, classified (index `[dy + 1][dx + 1]`),
-/// with their Jacobians computed on first use.
+/// with their surfaces worked out on first use.
 struct Ring {
     n: [[Neighbour; 3]; 3],
-    jac: [[Option<Jacobian>; 3]; 3],
+    surf: [[Option<Surface>; 3]; 3],
+}
+
+/// A neighbour's own surface over the centre pixel: its hit moved by its
+/// Jacobian, and the one colour it shows there if it provably stays in one
+/// checker square ([`checker_flat`]).
+#[derive(Clone, Copy)]
+struct Surface {
+    jac: Jacobian,
+    flat: Option<[f32; 3]>,
 }
 
 impl Ring {
@@ -243,7 +252,7 @@ impl Ring {
         }
         Ring {
             n,
-            jac: [[None; 3]; 3],
+            surf: [[None; 3]; 3],
         }
     }
 
@@ -269,13 +278,52 @@ impl Ring {
             Neighbour::Same => unreachable!("handled by the caller"),
             Neighbour::NoHit => background,
             Neighbour::Other(hit, ev) => {
-                let jac =
-                    *self.jac[j][i].get_or_insert_with(|| map.jacobian(x + ox, y + oy, hit, ev));
-                let h = jac.apply(hit, tx - ox as f64, ty - oy as f64);
-                backdrop.color(h[0], h[1])
+                let surf = *self.surf[j][i].get_or_insert_with(|| {
+                    let jac = map.jacobian(x + ox, y + oy, hit, ev);
+                    // The affine map over the pixel's square lies in the
+                    // box of its four corners.
+                    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                    for (a, b) in [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+                        let h = jac.apply(hit, a - ox as f64, b - oy as f64);
+                        for k in 0..2 {
+                            lo[k] = lo[k].min(h[k]);
+                            hi[k] = hi[k].max(h[k]);
+                        }
+                    }
+                    Surface {
+                        jac,
+                        flat: checker_flat(backdrop, lo, hi),
+                    }
+                });
+                match surf.flat {
+                    Some(c) => c,
+                    None => {
+                        let h = surf.jac.apply(hit, tx - ox as f64, ty - oy as f64);
+                        backdrop.color(h[0], h[1])
+                    }
+                }
             }
         }
     }
+}
+
+/// The colour of a checkerboard over the box `lo..=hi` (backdrop units)
+/// when the box, widened by `1e-9` of its coordinates and the square for
+/// the rounding of the points in it, lies inside one square: then every
+/// point of the box has that colour, exactly as [`Backdrop::color`] gives
+/// it. `None` for a photograph, a box across squares, or non-finite or
+/// out-of-range bounds.
+fn checker_flat(backdrop: &Backdrop, lo: [f64; 2], hi: [f64; 2]) -> Option<[f32; 3]> {
+    let Pattern::Checker { size, .. } = &backdrop.pattern else {
+        return None;
+    };
+    let inv = 1.0 / size;
+    let one = (0..2).all(|k| {
+        let m = 1e-9 * (lo[k].abs() + hi[k].abs() + size);
+        let (a, b) = ((lo[k] - m) * inv, (hi[k] + m) * inv);
+        a.abs() < 4.0e15 && b.abs() < 4.0e15 && floor_fast(a) == floor_fast(b)
+    });
+    one.then(|| backdrop.color(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])))
 }
 
 /// Everything a pixel needs to be shaded.
@@ -625,38 +673,81 @@ fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
     e.iter().flatten().all(|&h| square(h) == first)
 }
 
-/// [`in_one_square`] for the bicubic map. On each quadrant of the pixel the
-/// map is `Σ wx_i wy_j g_ji` over a 4×4 block of the grid (offsets -s, 0, s,
-/// 2s), with Catmull-Rom weights at `|t| ≤ 1/2`: they sum to 1 and their
-/// negative part is at most `a(1-a)/2 ≤ 1/8` per axis, so the tensor weights'
-/// negative mass is at most `2·(1/8)·(9/8) = 9/32`. Each coordinate then stays
-/// within the block's range widened by 9/32 of it on both sides. Every block
-/// holds the centre, so blocks inside one square share it.
+/// [`in_one_square`] for the bicubic map, from the pixel's own footprint.
+///
+/// Per axis, Catmull-Rom between `p1` and `p2` is the straight line minus a
+/// blend of the two second differences: `CR(a) = (1-a)p1 + a·p2 −
+/// a(1−a)/2·[(1−a)(p0 − 2p1 + p2) + a(p1 − 2p2 + p3)]`, so over a half
+/// pixel (`a ≤ 1/2`) it strays from the line by at most `1/8` of the larger
+/// `|second difference|`. On a quadrant the map is the rows' Catmull-Rom in
+/// `x` combined by Catmull-Rom in `y` (absolute weights summing to at most
+/// `5/4`), which is the bilinear map of the quadrant's 2×2 hits, off by at
+/// most `(1/8)·max|Δy²| + (5/32)·max|Δx²|` (or the same with the axes
+/// swapped; the smaller is taken). The bilinear map stays inside the hull of
+/// its values at the quadrant's corners, so the whole pixel stays inside the
+/// box of the bilinear map at `t ∈ {−½, 0, ½}²` widened by that margin —
+/// about the pixel's footprint on a smooth map, where the 4×4-block bound
+/// this replaced was several footprints wide (sphere scene: 139k of 262k
+/// pixels reached [`checker_average`] with it).
+///
+/// The box holds the centre hit, so when it lies in one square every
+/// sub-point has the centre's colour and [`checker_average`] would return it
+/// exactly: the answer changes no colour, only the work. A non-finite grid
+/// (or one whose sum overflows) and values beyond the exact range of the
+/// floors are never claimed.
 fn bicubic_in_one_square(g: &Grid, size: f64) -> bool {
-    const NEG: f64 = 9.0 / 32.0;
     let inv = 1.0 / size;
-    for sy in [-1i64, 1] {
-        for sx in [-1i64, 1] {
-            let at = |s: i64| [-s, 0, s, 2 * s].map(|o| (o + 2) as usize);
-            let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-            for j in at(sy) {
-                for i in at(sx) {
-                    for k in 0..2 {
-                        lo[k] = lo[k].min(g[j][i][k]);
-                        hi[k] = hi[k].max(g[j][i][k]);
-                    }
-                }
+    (0..2).all(|k| {
+        let at = |j: usize, i: usize| g[j][i][k];
+        let (mut sum, mut big) = (0.0f64, 0.0f64);
+        for row in g {
+            for p in row {
+                sum += p[k];
+                big = f64::max(big, p[k].abs());
             }
-            for k in 0..2 {
-                // Widened a little more for the rounding of the sums.
-                let m = NEG * (hi[k] - lo[k]) + 1e-9 * (lo[k].abs() + hi[k].abs() + size);
-                if floor_fast((lo[k] - m) * inv) != floor_fast((hi[k] + m) * inv) {
-                    return false;
+        }
+        if !sum.is_finite() {
+            return false;
+        }
+        // Largest |second difference| across x (dx) and y (dy), over the 3×3
+        // centres of all five rows or columns (`…5`) or the middle three (`…3`).
+        let (mut dx5, mut dx3, mut dy5, mut dy3) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for a in 0..5 {
+            for b in 1..4 {
+                let ddx = (at(a, b - 1) - 2.0 * at(a, b) + at(a, b + 1)).abs();
+                let ddy = (at(b - 1, a) - 2.0 * at(b, a) + at(b + 1, a)).abs();
+                dx5 = f64::max(dx5, ddx);
+                dy5 = f64::max(dy5, ddy);
+                if (1..4).contains(&a) {
+                    dx3 = f64::max(dx3, ddx);
+                    dy3 = f64::max(dy3, ddy);
                 }
             }
         }
-    }
-    true
+        let bend = f64::min(
+            dy3 / 8.0 + dx5 * (5.0 / 32.0),
+            dx3 / 8.0 + dy5 * (5.0 / 32.0),
+        );
+        // The bilinear map at the pixel's corners, edge midpoints and centre.
+        let c = at(2, 2);
+        let (mut lo, mut hi) = (c, c);
+        for sy in [1usize, 3] {
+            for sx in [1usize, 3] {
+                for h in [
+                    0.5 * (c + at(2, sx)),
+                    0.5 * (c + at(sy, 2)),
+                    0.25 * (c + at(2, sx) + at(sy, 2) + at(sy, sx)),
+                ] {
+                    lo = f64::min(lo, h);
+                    hi = f64::max(hi, h);
+                }
+            }
+        }
+        // Widened a little more for the rounding of the sums.
+        let m = bend + 1e-9 * (big + size);
+        let (a, b) = ((lo - m) * inv, (hi + m) * inv);
+        a.abs() < 4.0e15 && b.abs() < 4.0e15 && floor_fast(a) == floor_fast(b)
+    })
 }
 
 /// The larger side of the bounding box of the map at the pixel's centre,
@@ -699,10 +790,23 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
         st.pixels_blended += 1;
         // The map's rows once per sub-point row, not per sub-point.
         let line = edge_line(&c.map, x, y, Some(ev));
-        let sub_rows: Vec<[[f64; 2]; 5]> = c.taps.w.iter().map(|wy| rows(&g, wy)).collect();
-        let (color, _) = c.blend(x, y, &mut ring, line, |ix, jy| {
-            let h = cols(&sub_rows[jy], &c.taps.w[ix]);
-            c.backdrop.color(h[0], h[1])
+        // The own surface in one square shows its colour at every sub-point.
+        let flat = match &c.backdrop.pattern {
+            Pattern::Checker { size, .. } if in_one_square(&g, s.map, *size) => {
+                Some(c.backdrop.color(centre[0], centre[1]))
+            }
+            _ => None,
+        };
+        let sub_rows: Vec<[[f64; 2]; 5]> = match flat {
+            Some(_) => Vec::new(),
+            None => c.taps.w.iter().map(|wy| rows(&g, wy)).collect(),
+        };
+        let (color, _) = c.blend(x, y, &mut ring, line, |ix, jy| match flat {
+            Some(col) => col,
+            None => {
+                let h = cols(&sub_rows[jy], &c.taps.w[ix]);
+                c.backdrop.color(h[0], h[1])
+            }
         });
         return Some(color);
     }
@@ -737,95 +841,182 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
     Some(acc.map(|v| (v / (n * n) as f64) as f32))
 }
 
-/// For each pixel of row `y`: the bounding box `[lo_u, lo_v, hi_u, hi_v]` of
-/// the hits of its 5×5 neighbourhood when all 25 reach the backdrop on one
-/// piece (the same event count), else `None` (also within two pixels of the
-/// border). Separable, as plain loops over the row: columns of 5 pixels
-/// first, then windows of 5 columns. Comparisons with NaN give nonsense
-/// boxes, but a NaN hit is never on a piece, so those pixels are `None`.
-fn interior_row(film: &Film, y: i64) -> Vec<Option<[f32; 4]>> {
+/// How a pixel of a row relates to the fast path of the bicubic map over a
+/// checkerboard ([`interior_row`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Interior {
+    /// Some hit of the 5×5 neighbourhood is missing, not finite or on
+    /// another piece (or the pixel is within two of the border): the
+    /// general path.
+    No,
+    /// The whole neighbourhood is on the centre's piece and the map over
+    /// the pixel provably stays in the centre's square.
+    OneSquare,
+    /// On the centre's piece, but the map may reach another square.
+    Straddles,
+}
+
+/// Classifies every pixel of row `y` for [`prss_interior_checker`]: whether
+/// its 5×5 neighbourhood is on one piece, and whether the bicubic map over
+/// it stays in one checker square of side `size` — the bound of
+/// [`bicubic_in_one_square`] (the bilinear map at the pixel's corners, edge
+/// midpoints and centre, widened by the second differences), for
+/// [`LANES`] pixels at a time.
+///
+/// It runs on the film's `f32` hits in `f32` lanes (under
+/// [`crate::with_isa!`], so AVX2 or AVX-512 where there is one), with no
+/// branch per pixel. The rounding slack is `1e-5` of the largest hit and of
+/// the square (the `f64` test's is `1e-9`): far above the `f32` rounding of
+/// these few operations, so the claim holds for the exact map and for the
+/// `f64` sub-points of [`checker_average`]. A claim changes no colour (see
+/// [`bicubic_in_one_square`]), only the work. Comparisons with NaN fail and
+/// non-finite hits are never on a piece, so those pixels are
+/// [`Interior::No`].
+fn interior_row(film: &Film, y: i64, size: f64) -> Vec<Interior> {
     let (w, h) = (film.width as usize, film.height as i64);
-    let mut out = vec![None; w];
+    let mut out = vec![Interior::No; w];
     if y < 2 || y + 2 >= h || w < 5 {
         return out;
     }
-    let rows: [usize; 5] = std::array::from_fn(|j| (y as usize + j - 2) * w);
-    let centre = rows[2];
-    // Columns: the box of 5 vertical hits, and whether they share the
-    // centre row's event count and are finite.
-    let mut col_box = vec![[0.0f32; 4]; w];
-    let mut col_ok = vec![false; w];
-    for x in 0..w {
-        let e = film.events[centre + x];
-        let (mut b, mut ok) = (
-            [
-                f32::INFINITY,
-                f32::INFINITY,
-                f32::NEG_INFINITY,
-                f32::NEG_INFINITY,
-            ],
-            true,
-        );
-        for &r in &rows {
-            let (u, v) = (film.u[r + x], film.v[r + x]);
-            ok &= film.events[r + x] == e && u.is_finite() && v.is_finite();
-            b = [
-                if u < b[0] { u } else { b[0] },
-                if v < b[1] { v } else { b[1] },
-                if u > b[2] { u } else { b[2] },
-                if v > b[3] { v } else { b[3] },
-            ];
-        }
-        col_box[x] = b;
-        col_ok[x] = ok;
-    }
-    for x in 2..w - 2 {
-        let e = film.events[centre + x];
-        let ok = (x - 2..=x + 2).all(|c| col_ok[c] && film.events[centre + c] == e);
-        if ok {
-            let mut b = col_box[x - 2];
-            for c in &col_box[x - 1..=x + 2] {
-                b = [
-                    b[0].min(c[0]),
-                    b[1].min(c[1]),
-                    b[2].max(c[2]),
-                    b[3].max(c[3]),
-                ];
-            }
-            out[x] = Some(b);
-        }
-    }
+    let isa = crate::simd::Isa::current();
+    crate::with_isa!(isa, _L, _M => interior_row_in(film, y as usize, size, &mut out));
     out
+}
+
+/// Pixels [`interior_row`] classifies at once.
+const LANES: usize = 16;
+type Lane = [f32; LANES];
+
+/// `v[at..at + LANES]`, zero-filled past the end.
+#[inline(always)]
+fn load(v: &[f32], at: usize) -> Lane {
+    match v.get(at..at + LANES) {
+        Some(s) => s.try_into().unwrap(),
+        None => std::array::from_fn(|l| v.get(at + l).copied().unwrap_or(0.0)),
+    }
+}
+
+#[inline(always)]
+fn maxf(a: f32, b: f32) -> f32 {
+    if a > b { a } else { b }
+}
+
+#[inline(always)]
+fn minf(a: f32, b: f32) -> f32 {
+    if a < b { a } else { b }
+}
+
+/// The body of [`interior_row`] for row `y` (two rows inside the film):
+/// pixel `x = i + 2` is lane `i − i0` of the chunk starting at `i0`, and
+/// `g[j][d]` holds the hits at row `y + j − 2`, column `x + d − 2`.
+#[inline(always)]
+fn interior_row_in(film: &Film, y: usize, size: f64, out: &mut [Interior]) {
+    let w = film.width as usize;
+    let n = w - 4;
+    let at = |j: usize| (y + j - 2) * w;
+    let ev: [&[f32]; 5] = std::array::from_fn(|j| &film.events[at(j)..at(j) + w]);
+    let q: [[&[f32]; 5]; 2] = [
+        std::array::from_fn(|j| &film.u[at(j)..at(j) + w]),
+        std::array::from_fn(|j| &film.v[at(j)..at(j) + w]),
+    ];
+    let inv = (1.0 / size) as f32;
+    let slack = 1e-5 * size as f32;
+    for i0 in (0..n).step_by(LANES) {
+        let e0 = load(ev[2], i0 + 2);
+        let mut ok = [true; LANES];
+        for j in 0..5 {
+            for d in 0..5 {
+                let (e, u, v) = (
+                    load(ev[j], i0 + d),
+                    load(q[0][j], i0 + d),
+                    load(q[1][j], i0 + d),
+                );
+                for l in 0..LANES {
+                    // Finite: `|u| < ∞` fails for NaN and ±∞.
+                    ok[l] &= (e[l] == e0[l])
+                        & (u[l].abs() < f32::INFINITY)
+                        & (v[l].abs() < f32::INFINITY);
+                }
+            }
+        }
+        let mut one = ok;
+        for qk in &q {
+            let g: [[Lane; 5]; 5] =
+                std::array::from_fn(|j| std::array::from_fn(|d| load(qk[j], i0 + d)));
+            for l in 0..LANES {
+                let at = |j: usize, d: usize| g[j][d][l];
+                let mut big = 0.0f32;
+                for j in 0..5 {
+                    for d in 0..5 {
+                        big = maxf(big, at(j, d).abs());
+                    }
+                }
+                // Largest |second difference| across x (dx) and down y (dy),
+                // at the 3×3 centres of all five rows or columns (`…5`) or
+                // of the middle three (`…3`).
+                let (mut dx5, mut dx3, mut dy5, mut dy3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
+                for a in 0..5 {
+                    for b in 1..4 {
+                        let ddx = (at(a, b - 1) - 2.0 * at(a, b) + at(a, b + 1)).abs();
+                        let ddy = (at(b - 1, a) - 2.0 * at(b, a) + at(b + 1, a)).abs();
+                        dx5 = maxf(dx5, ddx);
+                        dy5 = maxf(dy5, ddy);
+                        if (1..4).contains(&a) {
+                            dx3 = maxf(dx3, ddx);
+                            dy3 = maxf(dy3, ddy);
+                        }
+                    }
+                }
+                let bend = minf(
+                    dy3 * 0.125 + dx5 * (5.0 / 32.0),
+                    dx3 * 0.125 + dy5 * (5.0 / 32.0),
+                );
+                let c = at(2, 2);
+                let (mut lo, mut hi) = (c, c);
+                for (sy, sx) in [(1, 1), (1, 3), (3, 1), (3, 3)] {
+                    let (ex, ey) = (at(2, sx), at(sy, 2));
+                    for p in [
+                        0.5 * (c + ex),
+                        0.5 * (c + ey),
+                        0.25 * ((c + ex) + (ey + at(sy, sx))),
+                    ] {
+                        lo = minf(lo, p);
+                        hi = maxf(hi, p);
+                    }
+                }
+                let m = bend + 1e-5 * big + slack;
+                let (a, b) = ((lo - m) * inv, (hi + m) * inv);
+                one[l] &= (a.abs() < 1e15) & (b.abs() < 1e15) & (a.floor() == b.floor());
+            }
+        }
+        for (l, o) in out[i0 + 2..(i0 + LANES).min(n) + 2].iter_mut().enumerate() {
+            *o = match (ok[l], one[l]) {
+                (false, _) => Interior::No,
+                (true, true) => Interior::OneSquare,
+                (true, false) => Interior::Straddles,
+            };
+        }
+    }
 }
 
 /// PRSS colour of a pixel whose whole 5×5 neighbourhood reaches the backdrop
 /// on the centre's piece — most pixels of a frame — for the bicubic map over
-/// a checkerboard, given that neighbourhood's bounding box `b` (from
-/// [`interior_row`]). The general path ([`prss_pixel`]) classifies each
-/// neighbour and fills a grid; here the one-square test first tries the
-/// bound over the whole 5×5 block, which contains each quadrant's bound of
-/// [`bicubic_in_one_square`] (its slack is four times theirs, far above the
-/// rounding of either), so it never says yes where they say no; then the
-/// film's rows fill the grid directly. Same colour and stats as the general
-/// path.
+/// a checkerboard, classified by [`interior_row`]. The general path
+/// ([`prss_pixel`]) classifies each neighbour and fills a grid; here the
+/// film's rows fill it directly, and a pixel in one square takes the
+/// centre's colour, which [`checker_average`] would return too. Same colour
+/// and stats as the general path.
 fn prss_interior_checker(
     c: &Ctx,
     film: &Film,
     (x, y): (i64, i64),
-    b: [f32; 4],
+    class: Interior,
     size: f64,
     colors: &[[f32; 3]; 2],
 ) -> [f32; 3] {
-    const NEG: f64 = 9.0 / 32.0;
-    let inv = 1.0 / size;
     let w = film.width as usize;
     let centre = y as usize * w + x as usize;
-    let one_square = (0..2).all(|k| {
-        let (lo, hi) = (b[k] as f64, b[k + 2] as f64);
-        let m = NEG * (hi - lo) + 4e-9 * (lo.abs() + hi.abs() + size);
-        floor_fast((lo - m) * inv) == floor_fast((hi + m) * inv)
-    });
-    if one_square {
+    if class == Interior::OneSquare {
         return c
             .backdrop
             .color(film.u[centre] as f64, film.v[centre] as f64);
@@ -834,10 +1025,6 @@ fn prss_interior_checker(
         let start = centre + j * w - 2 * w - 2;
         std::array::from_fn(|i| [film.u[start + i] as f64, film.v[start + i] as f64])
     });
-    if bicubic_in_one_square(&g, size) {
-        let [u, v] = g[2][2];
-        return c.backdrop.color(u, v);
-    }
     checker_average(&g, &c.taps, size, colors)
 }
 
@@ -1025,8 +1212,8 @@ pub fn shade(
             let mut st = PostStats::default();
             let mut colors = Vec::with_capacity(film.width as usize);
             let mut flagged = Vec::new();
-            let boxes = match interior {
-                Some(_) => interior_row(film, y),
+            let classes = match interior {
+                Some((size, _)) => interior_row(film, y, size),
                 None => Vec::new(),
             };
             for x in 0..film.width as i64 {
@@ -1037,10 +1224,10 @@ pub fn shade(
                 } else {
                     st.pixels += 1;
                     match s.mode {
-                        Mode::Prss => match (interior, boxes.get(x as usize)) {
-                            (Some((size, colors)), Some(&Some(b))) => {
+                        Mode::Prss => match (interior, classes.get(x as usize)) {
+                            (Some((size, colors)), Some(&class)) if class != Interior::No => {
                                 st.quadrants_interpolated += 4;
-                                Some(prss_interior_checker(&c, film, (x, y), b, size, colors))
+                                Some(prss_interior_checker(&c, film, (x, y), class, size, colors))
                             }
                             _ => prss_pixel(&c, x, y, &mut st),
                         },
@@ -1201,7 +1388,7 @@ mod tests {
                 .wrapping_add(1442695040888963407);
             ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
         };
-        let mut claimed = 0;
+        let (mut claimed, mut row_claimed) = (0, 0);
         for _ in 0..2000 {
             let (cu, cv) = (0.5 + 0.4 * rnd(), 0.5 + 0.4 * rnd());
             let (a, b, c, d) = (0.2 * rnd(), 0.2 * rnd(), 0.2 * rnd(), 0.2 * rnd());
@@ -1214,6 +1401,30 @@ mod tests {
                         cu + a * x + b * y + bend * x * x + 0.05 * rnd(),
                         cv + c * x + d * y - bend * x * y + 0.05 * rnd(),
                     ];
+                }
+            }
+            // The row pass on the same hits (as the film's f32), for the
+            // bicubic map: its claims must hold for the map of those hits.
+            let mut f = Film::new(5, 5);
+            for j in 0..5 {
+                for i in 0..5 {
+                    f.u[j * 5 + i] = g[j][i][0] as f32;
+                    f.v[j * 5 + i] = g[j][i][1] as f32;
+                }
+            }
+            let g32: Grid = std::array::from_fn(|j| {
+                std::array::from_fn(|i| [f.u[j * 5 + i] as f64, f.v[j * 5 + i] as f64])
+            });
+            if interior_row(&f, 2, 1.0)[2] == Interior::OneSquare {
+                row_claimed += 1;
+                let sq = |h: [f64; 2]| (h[0].floor(), h[1].floor());
+                let first = sq(g32[2][2]);
+                for jy in 0..=40 {
+                    for ix in 0..=40 {
+                        let (tx, ty) = (ix as f64 / 40.0 - 0.5, jy as f64 / 40.0 - 0.5);
+                        let h = eval(PrssMap::Bicubic, &g32, tx, ty);
+                        assert_eq!(sq(h), first, "row pass at ({tx}, {ty})");
+                    }
                 }
             }
             for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
@@ -1231,7 +1442,10 @@ mod tests {
                 }
             }
         }
-        assert!(claimed > 100, "the shortcut fires: {claimed}");
+        assert!(
+            claimed > 100 && row_claimed > 50,
+            "the shortcut fires: {claimed}, the row pass: {row_claimed}"
+        );
     }
 
     /// A film of two flat pieces split by the line `x + slope·y = b` (image
@@ -1280,25 +1494,36 @@ mod tests {
             coarse: (1..8).map(|k| Taps::new(k, PrssMap::Bicubic)).collect(),
             unresolved: Vec::new(),
         };
-        let (mut fast, mut mixed) = (0, 0);
+        let (mut fast, mut mixed, mut claimed) = (0, 0, 0);
         for y in 0..h as i64 {
-            let boxes = interior_row(&f, y);
+            let classes = interior_row(&f, y, 4.0);
             for x in 0..w as i64 {
-                let Some(b) = boxes[x as usize] else {
+                let class = classes[x as usize];
+                if class == Interior::No {
                     continue;
-                };
+                }
                 let mut st = PostStats::default();
                 let want = prss_pixel(&c, x, y, &mut st).unwrap();
-                let got = prss_interior_checker(&c, &f, (x, y), b, 4.0, &[[1.0; 3], [0.0; 3]]);
+                // The sub-points' own average, whatever the class says.
+                let g: Grid = std::array::from_fn(|j| {
+                    std::array::from_fn(|i| {
+                        let k = ((y + j as i64 - 2) * w as i64 + x + i as i64 - 2) as usize;
+                        [f.u[k] as f64, f.v[k] as f64]
+                    })
+                });
+                let all = checker_average(&g, &c.taps, 4.0, &[[1.0; 3], [0.0; 3]]);
+                let got = prss_interior_checker(&c, &f, (x, y), class, 4.0, &[[1.0; 3], [0.0; 3]]);
                 assert_eq!(got, want, "({x}, {y})");
+                assert_eq!(got, all, "({x}, {y}) {class:?}");
                 assert_eq!(st.quadrants_interpolated, 4);
                 fast += 1;
                 mixed += (got[0] != 0.0 && got[0] != 1.0) as usize;
+                claimed += (class == Interior::OneSquare) as usize;
             }
         }
         assert!(
-            fast > 800 && mixed > 200,
-            "{fast} fast pixels, {mixed} mixed"
+            fast > 800 && mixed > 200 && claimed > 300,
+            "{fast} fast pixels, {mixed} mixed, {claimed} in one square"
         );
     }
 
