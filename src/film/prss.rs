@@ -471,49 +471,51 @@ impl Ctx<'_> {
         let n = self.hats.t.len();
         let mut acc = [0.0f64; 3];
         let mut own_total = 0.0;
+        let same_at: [[bool; 3]; 3] = ring.n.map(|row| row.map(|c| c == Neighbour::Same));
+        let is_same = |(ox, oy): (i64, i64)| same_at[(oy + 1) as usize][(ox + 1) as usize];
         for jy in 0..n {
             let (sy, b) = (self.hats.side[jy], self.hats.t[jy].abs());
             let ty = self.hats.t[jy];
             for ix in 0..n {
                 let (sx, a) = (self.hats.side[ix], self.hats.t[ix].abs());
                 let tx = self.hats.t[ix];
-                let corners = [
-                    ((0, 0), (1.0 - a) * (1.0 - b)),
-                    ((sx, 0), a * (1.0 - b)),
-                    ((0, sy), (1.0 - a) * b),
-                    ((sx, sy), a * b),
-                ];
-                let is_same = |ring: &Ring, (ox, oy): (i64, i64)| {
-                    ring.n[(oy + 1) as usize][(ox + 1) as usize] == Neighbour::Same
-                };
+                // The four pixel centres around the sub-point and their
+                // bilinear hats (plain arrays, indexed in a fixed loop, so
+                // they stay in registers).
+                let offs = [(0, 0), (sx, 0), (0, sy), (sx, sy)];
+                let ws = [(1.0 - a) * (1.0 - b), a * (1.0 - b), (1.0 - a) * b, a * b];
                 let mut same = 0.0;
                 if let Some(l) = line {
                     if l.d + l.n[0] * tx + l.n[1] * ty >= 0.0 {
                         same = 1.0;
                     } else {
-                        // The other side: the heaviest corner off the piece,
-                        // else the nearest such neighbour.
-                        let pick = corners
-                            .iter()
-                            .filter(|(o, w)| *w > 0.0 && !is_same(ring, *o))
-                            .max_by(|p, q| p.1.total_cmp(&q.1))
-                            .map(|(o, _)| *o)
-                            .or_else(|| {
-                                let mut best: Option<((i64, i64), f64)> = None;
-                                for oy in -1..=1 {
-                                    for ox in -1..=1 {
-                                        if is_same(ring, (ox, oy)) {
-                                            continue;
-                                        }
-                                        let dd =
-                                            (ox as f64 - tx).powi(2) + (oy as f64 - ty).powi(2);
-                                        if best.is_none_or(|(_, b)| dd < b) {
-                                            best = Some(((ox, oy), dd));
-                                        }
+                        // The other side: the heaviest corner off the piece
+                        // (the last of equals), else the nearest such
+                        // neighbour.
+                        let mut pick: Option<((i64, i64), f64)> = None;
+                        for q in 0..4 {
+                            if ws[q] > 0.0
+                                && !is_same(offs[q])
+                                && pick.is_none_or(|(_, w)| ws[q] >= w)
+                            {
+                                pick = Some((offs[q], ws[q]));
+                            }
+                        }
+                        let pick = pick.map(|(o, _)| o).or_else(|| {
+                            let mut best: Option<((i64, i64), f64)> = None;
+                            for oy in -1..=1 {
+                                for ox in -1..=1 {
+                                    if is_same((ox, oy)) {
+                                        continue;
+                                    }
+                                    let dd = (ox as f64 - tx).powi(2) + (oy as f64 - ty).powi(2);
+                                    if best.is_none_or(|(_, b)| dd < b) {
+                                        best = Some(((ox, oy), dd));
                                     }
                                 }
-                                best.map(|(o, _)| o)
-                            });
+                            }
+                            best.map(|(o, _)| o)
+                        });
                         match pick {
                             Some(o) => {
                                 let c = ring.other_color(
@@ -533,11 +535,12 @@ impl Ctx<'_> {
                         }
                     }
                 } else {
-                    for (o, w) in corners {
+                    for q in 0..4 {
+                        let (o, w) = (offs[q], ws[q]);
                         if w == 0.0 {
                             continue;
                         }
-                        if is_same(ring, o) {
+                        if is_same(o) {
                             same += w;
                         } else {
                             let c = ring.other_color(
@@ -797,12 +800,18 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
             }
             _ => None,
         };
-        let sub_rows: Vec<[[f64; 2]; 5]> = match flat {
-            Some(_) => Vec::new(),
-            None => c.taps.w.iter().map(|wy| rows(&g, wy)).collect(),
+        // Else over a checkerboard, its colour at every sub-point at once.
+        let table = match (&c.backdrop.pattern, flat) {
+            (Pattern::Checker { size, colors }, None) => checker_colors(&g, &c.taps, *size, colors),
+            _ => Vec::new(),
+        };
+        let sub_rows: Vec<[[f64; 2]; 5]> = match (flat, table.is_empty()) {
+            (None, true) => c.taps.w.iter().map(|wy| rows(&g, wy)).collect(),
+            _ => Vec::new(),
         };
         let (color, _) = c.blend(x, y, &mut ring, line, |ix, jy| match flat {
             Some(col) => col,
+            None if !table.is_empty() => table[jy * n + ix],
             None => {
                 let h = cols(&sub_rows[jy], &c.taps.w[ix]);
                 c.backdrop.color(h[0], h[1])
@@ -1052,6 +1061,49 @@ fn checker_average(g: &Grid, taps: &Taps, size: f64, colors: &[[f32; 3]; 2]) -> 
         ((colors[0][k] as f64 * even as f64 + colors[1][k] as f64 * odd as f64) / (n * n) as f64)
             as f32
     })
+}
+
+/// The checkerboard's colour at every sub-point of `taps` of the map `g`
+/// (index `jy·n + ix`): the points [`rows`] and [`cols`] give, bit for bit
+/// (the same sums in the same order, a chunk of sub-points at a time), and
+/// the colour [`Backdrop::color`] gives there — the parity of
+/// `⌊u/size⌋ + ⌊v/size⌋` from the same divisions, by
+/// [`crate::simd::odd_floor_sum_mask`].
+fn checker_colors(g: &Grid, taps: &Taps, size: f64, colors: &[[f32; 3]; 2]) -> Vec<[f32; 3]> {
+    let n = taps.t.len();
+    let mut out = Vec::with_capacity(n * n);
+    let isa = crate::simd::Isa::current();
+    crate::with_isa!(isa, L, _M => checker_colors_in::<L>(g, taps, size, colors, &mut out));
+    out
+}
+
+#[inline(always)]
+fn checker_colors_in<const L: usize>(
+    g: &Grid,
+    taps: &Taps,
+    size: f64,
+    colors: &[[f32; 3]; 2],
+    out: &mut Vec<[f32; 3]>,
+) {
+    let n = taps.t.len();
+    for wy in &taps.w {
+        let r = rows(g, wy);
+        for (c, wc) in taps.w_chunks.iter().enumerate() {
+            let (mut hx, mut hy) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
+            for (i, ri) in r.iter().enumerate() {
+                for m in 0..CHUNK {
+                    hx[m] += wc[i][m] * ri[0];
+                    hy[m] += wc[i][m] * ri[1];
+                }
+            }
+            let (qx, qy) = (hx.map(|h| h / size), hy.map(|h| h / size));
+            // SAFETY: L == 8 only under Isa::Avx512 (`with_isa!`).
+            let mask = unsafe { crate::simd::odd_floor_sum_mask::<L>(&qx, &qy) };
+            for m in 0..(n - c * CHUNK).min(CHUNK) {
+                out.push(colors[(mask >> m & 1) as usize]);
+            }
+        }
+    }
 }
 
 /// Sub-points of `taps` on odd squares of the unit checkerboard, one at a
