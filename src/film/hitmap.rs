@@ -88,6 +88,19 @@ impl<'a> HitMap<'a> {
         self.at(x, y).filter(|(_, e)| *e == ev).map(|(h, _)| h)
     }
 
+    /// Whether pixel `(x, y)` (inside the image) is on the piece of a centre
+    /// with hit state `centre`: `neighbour(x, y, centre) == Neighbour::Same`
+    /// without building the neighbour.
+    #[inline(always)]
+    pub fn same_piece(&self, x: i64, y: i64, centre: Option<f32>) -> bool {
+        let i = (y * self.w + x) as usize;
+        let hit = self.film.u[i].is_finite() && self.film.v[i].is_finite();
+        match centre {
+            Some(ev) => hit && self.film.events[i] == ev,
+            None => !hit,
+        }
+    }
+
     /// How pixel `(x, y)` relates to a centre with hit state `centre`.
     #[inline]
     pub fn neighbour(&self, x: i64, y: i64, centre: Option<f32>) -> Neighbour {

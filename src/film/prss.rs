@@ -405,7 +405,7 @@ fn edge_line(map: &HitMap, x: i64, y: i64, centre: Option<f32>) -> Option<EdgeLi
                 continue;
             }
             let w = weights[((j + EDGE_RADIUS) * EDGE_SIDE as i64 + i + EDGE_RADIUS) as usize];
-            let same = map.neighbour(x + i, y + j, centre) == Neighbour::Same;
+            let same = map.same_piece(x + i, y + j, centre);
             let (gx, gy) = (i as f64 / s2 * w, j as f64 / s2 * w);
             den += w;
             dden[0] += gx;
