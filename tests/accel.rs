@@ -230,16 +230,45 @@ fn octree_renders_match_unclassified_dda() {
 
 /// Renders `scene` with and without `clear_crossing_cells` over one prepared
 /// field and classification; returns both frames.
-fn with_and_without_clearing(scene: &Scene, vol: Arc<Volume>) -> (render::Frame, render::Frame) {
+/// Renders `scene` as given and with `off` applied to a copy, over one
+/// preparation.
+fn with_and_without(
+    scene: &Scene,
+    vol: Arc<Volume>,
+    off: impl Fn(&mut Scene),
+) -> (render::Frame, render::Frame) {
     let method = scene.render.classify.unwrap();
     let prep = Prepared::new_in(vol, scene.surface.filter, scene.render.coefficients)
         .with_accel(scene.surface.iso, method);
-    let mut off = scene.clone();
-    off.render.clear_crossing_cells = false;
+    let mut other = scene.clone();
+    off(&mut other);
     (
         render::render(scene, &prep, None),
-        render::render(&off, &prep, None),
+        render::render(&other, &prep, None),
     )
+}
+
+/// The two frames' hits, event counts and colours are the same bits (a
+/// failure names the first pixel that differs and how many do).
+fn assert_same_bits(a: &render::Frame, b: &render::Frame, what: &str) {
+    fn same<T: PartialEq + std::fmt::Debug>(a: &[T], b: &[T], what: &str, name: &str) {
+        assert_eq!(a.len(), b.len(), "{what}: {name} length");
+        let diff: Vec<usize> = (0..a.len()).filter(|&i| a[i] != b[i]).collect();
+        if let Some(&i) = diff.first() {
+            panic!(
+                "{what}: {name} differs at {} pixels, first {i}: {:?} vs {:?}",
+                diff.len(),
+                a[i],
+                b[i]
+            );
+        }
+    }
+    let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+    let (a, b) = (&a.film, &b.film);
+    same(&bits(&a.u), &bits(&b.u), what, "u");
+    same(&bits(&a.v), &bits(&b.v), what, "v");
+    same(&bits(&a.events), &bits(&b.events), what, "events");
+    same(&a.color, &b.color, what, "colour");
 }
 
 /// A ray leaving a crossing skips the rest of its cell where the curvature
@@ -320,13 +349,8 @@ traversal = "distance"
             Scene::load(&dir.join(name), &o).unwrap()
         };
         let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
-        let (on, off) = with_and_without_clearing(&scene, vol);
-        let (a, b) = (&on.film, &off.film);
-        let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
-        assert_eq!(bits(&a.u), bits(&b.u), "{name} {extra:?}: u");
-        assert_eq!(bits(&a.v), bits(&b.v), "{name} {extra:?}: v");
-        assert_eq!(bits(&a.events), bits(&b.events), "{name} {extra:?}: events");
-        assert_eq!(a.color, b.color, "{name} {extra:?}: colour");
+        let (on, off) = with_and_without(&scene, vol, |s| s.render.clear_crossing_cells = false);
+        assert_same_bits(&on, &off, &format!("{name} {extra:?}"));
         let (c, d) = (on.stats.counters, off.stats.counters);
         let events = c.refractions + c.reflections;
         eprintln!(
@@ -338,5 +362,65 @@ traversal = "distance"
         // A cleared cell is at most one solve saved (masks may have skipped it).
         assert!(c.cells_solved < d.cells_solved);
         assert!(c.cells_solved + c.cells_cleared >= d.cells_solved);
+    }
+}
+
+/// Primary rays that start their walk at the projected octree's bound (and
+/// those that go straight to the backdrop) give the same bits as walking the
+/// whole approach: perspective and orthographic cameras, supersampled rays
+/// (anywhere in their pixel), a camera inside the domain, both cell
+/// traversals that use it, and `f32` storage; the walk visits fewer cells
+/// and solves exactly the same ones.
+#[test]
+fn skipping_the_empty_approach_changes_no_bit() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let small = ["image.width=96", "image.height=80"];
+    let cases: [(&str, &[&str]); 6] = [
+        ("sphere.toml", &["render.traversal=distance"]),
+        (
+            "sphere.toml",
+            &[
+                "render.traversal=octree",
+                "render.supersampling=jitter",
+                "render.samples=3",
+            ],
+        ),
+        (
+            "sphere.toml",
+            &[
+                "render.traversal=distance",
+                "camera.kind=\"orthographic\"",
+                "camera.height=70.0",
+            ],
+        ),
+        (
+            "sphere.toml",
+            &[
+                "render.traversal=octree",
+                "camera.position=[30.0, 28.0, 6.0]",
+                "camera.fov_y=70.0",
+            ],
+        ),
+        (
+            "ball-two-holes.toml",
+            &["render.traversal=distance", "render.coefficients=f32"],
+        ),
+        ("lobster.toml", &["render.traversal=octree"]),
+    ];
+    for (name, extra) in cases {
+        let o: Vec<String> = small.iter().chain(extra).map(|s| s.to_string()).collect();
+        let scene = Scene::load(&dir.join(name), &o).unwrap();
+        let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
+        let (on, off) = with_and_without(&scene, vol, |s| s.render.skip_empty_approach = false);
+        let what = format!("{name} {extra:?}");
+        assert_same_bits(&on, &off, &what);
+        let (c, d) = (on.stats.counters, off.stats.counters);
+        eprintln!(
+            "{what}: cells visited {} -> {}",
+            d.cells_visited, c.cells_visited
+        );
+        assert_eq!(c.cells_solved, d.cells_solved, "{what}: solves");
+        assert_eq!(c.refractions, d.refractions, "{what}: refractions");
+        assert!(c.cells_visited < d.cells_visited, "{what}: nothing skipped");
     }
 }

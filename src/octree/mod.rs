@@ -155,6 +155,29 @@ impl Octree {
             + self.skip.len()
     }
 
+    /// The occupied blocks of `2^level` cells (`1 ≤ level ≤ top()`), as
+    /// block coordinates: block `b` holds cells `b·2^level ..` on each axis.
+    pub fn occupied_blocks(&self, level: u32) -> Vec<[usize; 3]> {
+        let Some(l) = level
+            .checked_sub(1)
+            .and_then(|i| self.levels.get(i as usize))
+        else {
+            return Vec::new();
+        };
+        let [nx, ny, nz] = l.dims;
+        let mut out = Vec::new();
+        for z in 0..nz {
+            for y in 0..ny {
+                for x in 0..nx {
+                    if l.get([x, y, z]) {
+                        out.push([x, y, z]);
+                    }
+                }
+            }
+        }
+        out
+    }
+
     /// The flattened map's byte for cell `c` (in range): [`TAGGED`], or the
     /// level of the largest empty block holding it.
     #[inline(always)]

@@ -3,6 +3,7 @@
 
 use glam::DVec3;
 
+use super::first_hit::FirstHit;
 use crate::classify::{CellBound, CurvatureBounds, SubCellMasks};
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
@@ -48,6 +49,9 @@ pub struct Ctx<'a, T: Coefficient = f64> {
     /// Second-derivative bounds of the tagged cells (B-splines of degree ≥ 2),
     /// when `clear_crossing_cells` is on.
     pub curvature: Option<&'a CurvatureBounds>,
+    /// Where primary rays may start their walk, per pixel block, when
+    /// [`RenderSettings::skips_empty_approach`].
+    pub first_hit: Option<FirstHit>,
     pub settings: RenderSettings,
     /// Indices of refraction inside and outside the object.
     pub ior_inside: f64,
@@ -107,6 +111,15 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
                 prep.accel.as_ref().and_then(|a| a.curvature(&prep.field).0)
             } else {
                 None
+            },
+            first_hit: match &prep.accel {
+                Some(a) if scene.render.skips_empty_approach() => Some(FirstHit::build(
+                    &scene.camera,
+                    &a.octree,
+                    spacing,
+                    lattice.offset,
+                )),
+                _ => None,
             },
             settings: scene.render,
             ior_inside: scene.surface.ior,

@@ -13,6 +13,7 @@
 //! any thread count.
 
 pub mod context;
+pub mod first_hit;
 pub mod packet;
 pub mod stages;
 pub mod stats;

@@ -34,7 +34,18 @@ pub fn entry<const S: usize, T: Coefficient>(
             }
             Some((t0, t1)) => {
                 c.rays_entering += 1;
+                // The walk starts where the surface can first be (the
+                // piece, and so every solve, still starts at `t0`).
+                let t_walk = ctx.first_hit.as_ref().map_or(t0, |f| f.at(rays.pixel[i]));
+                if t_walk >= t1 {
+                    rays.fate[i] = Fate::Escaped;
+                    record.push(r);
+                    continue;
+                }
                 place::<S, _>(ctx, rays, i, t0, t1, c);
+                if t_walk > t0 {
+                    move_walk(ctx, rays, i, t_walk);
+                }
                 if ctx.traversal() == Traversal::Step {
                     // `place` sampled the field at this very point (the
                     // march's first sample).
@@ -47,6 +58,20 @@ pub fn entry<const S: usize, T: Coefficient>(
             }
         }
     }
+}
+
+/// Moves ray `i`'s walk (not its piece) to parameter `t`, in the cell there.
+fn move_walk<T: Coefficient>(ctx: &Ctx<T>, rays: &mut Rays, i: usize, t: f64) {
+    let p = ctx.to_grid(rays.origin(i) + t * rays.direction(i));
+    rays.t[i] = t;
+    rays.set_cell(
+        i,
+        [
+            ctx.lattice.cell_of(0, p.x),
+            ctx.lattice.cell_of(1, p.y),
+            ctx.lattice.cell_of(2, p.z),
+        ],
+    );
 }
 
 /// Sets ray `i`'s medium from the field at the start of its first piece,
