@@ -387,14 +387,17 @@ fn inverse_phi(p: f64) -> f64 {
 /// that gradient.
 fn edge_line(map: &HitMap, x: i64, y: i64, centre: Option<f32>) -> Option<EdgeLine> {
     let s2 = EDGE_SIGMA * EDGE_SIGMA;
-    // The window's Gaussian weights, computed once (81 `exp` per boundary
-    // pixel cost 6% of the stage on the teapot).
-    static WEIGHTS: std::sync::OnceLock<[f64; EDGE_SIDE * EDGE_SIDE]> = std::sync::OnceLock::new();
+    // The window's Gaussian weights and their gradient weights, computed
+    // once (81 `exp` per boundary pixel cost 6% of the stage on the teapot;
+    // the 162 divisions for the gradient weights 2% more).
+    static WEIGHTS: std::sync::OnceLock<[[f64; 3]; EDGE_SIDE * EDGE_SIDE]> =
+        std::sync::OnceLock::new();
     let weights = WEIGHTS.get_or_init(|| {
         std::array::from_fn(|k| {
             let i = (k % EDGE_SIDE) as i64 - EDGE_RADIUS;
             let j = (k / EDGE_SIDE) as i64 - EDGE_RADIUS;
-            (-((i * i + j * j) as f64) / (2.0 * s2)).exp()
+            let w = (-((i * i + j * j) as f64) / (2.0 * s2)).exp();
+            [w, i as f64 / s2 * w, j as f64 / s2 * w]
         })
     });
     let (mut num, mut den) = (0.0, 0.0);
@@ -404,9 +407,9 @@ fn edge_line(map: &HitMap, x: i64, y: i64, centre: Option<f32>) -> Option<EdgeLi
             if !map.inside(x + i, y + j) {
                 continue;
             }
-            let w = weights[((j + EDGE_RADIUS) * EDGE_SIDE as i64 + i + EDGE_RADIUS) as usize];
+            let [w, gx, gy] =
+                weights[((j + EDGE_RADIUS) * EDGE_SIDE as i64 + i + EDGE_RADIUS) as usize];
             let same = map.same_piece(x + i, y + j, centre);
-            let (gx, gy) = (i as f64 / s2 * w, j as f64 / s2 * w);
             den += w;
             dden[0] += gx;
             dden[1] += gy;
