@@ -320,8 +320,7 @@ fn checker_flat(backdrop: &Backdrop, lo: [f64; 2], hi: [f64; 2]) -> Option<[f32;
     let inv = 1.0 / size;
     let one = (0..2).all(|k| {
         let m = 1e-9 * (lo[k].abs() + hi[k].abs() + size);
-        let (a, b) = ((lo[k] - m) * inv, (hi[k] + m) * inv);
-        a.abs() < 4.0e15 && b.abs() < 4.0e15 && floor_fast(a) == floor_fast(b)
+        box_in_one_square(lo[k], hi[k], m, inv)
     });
     one.then(|| backdrop.color(0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])))
 }
@@ -704,56 +703,119 @@ fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
 fn bicubic_in_one_square(g: &Grid, size: f64) -> bool {
     let inv = 1.0 / size;
     (0..2).all(|k| {
-        let at = |j: usize, i: usize| g[j][i][k];
-        let (mut sum, mut big) = (0.0f64, 0.0f64);
-        for row in g {
-            for p in row {
-                sum += p[k];
-                big = f64::max(big, p[k].abs());
-            }
-        }
+        let sum: f64 = g.iter().flatten().map(|p| p[k]).sum();
         if !sum.is_finite() {
             return false;
         }
-        // Largest |second difference| across x (dx) and y (dy), over the 3×3
-        // centres of all five rows or columns (`…5`) or the middle three (`…3`).
-        let (mut dx5, mut dx3, mut dy5, mut dy3) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-        for a in 0..5 {
-            for b in 1..4 {
-                let ddx = (at(a, b - 1) - 2.0 * at(a, b) + at(a, b + 1)).abs();
-                let ddy = (at(b - 1, a) - 2.0 * at(b, a) + at(b + 1, a)).abs();
-                dx5 = f64::max(dx5, ddx);
-                dy5 = f64::max(dy5, ddy);
-                if (1..4).contains(&a) {
-                    dx3 = f64::max(dx3, ddx);
-                    dy3 = f64::max(dy3, ddy);
-                }
-            }
-        }
-        let bend = f64::min(
-            dy3 / 8.0 + dx5 * (5.0 / 32.0),
-            dx3 / 8.0 + dy5 * (5.0 / 32.0),
-        );
-        // The bilinear map at the pixel's corners, edge midpoints and centre.
-        let c = at(2, 2);
-        let (mut lo, mut hi) = (c, c);
-        for sy in [1usize, 3] {
-            for sx in [1usize, 3] {
-                for h in [
-                    0.5 * (c + at(2, sx)),
-                    0.5 * (c + at(sy, 2)),
-                    0.25 * (c + at(2, sx) + at(sy, 2) + at(sy, sx)),
-                ] {
-                    lo = f64::min(lo, h);
-                    hi = f64::max(hi, h);
-                }
-            }
-        }
+        let (lo, hi, bend, big) = footprint_box(|j, i| g[j][i][k]);
         // Widened a little more for the rounding of the sums.
-        let m = bend + 1e-9 * (big + size);
-        let (a, b) = ((lo - m) * inv, (hi + m) * inv);
-        a.abs() < 4.0e15 && b.abs() < 4.0e15 && floor_fast(a) == floor_fast(b)
+        box_in_one_square(lo, hi, bend + 1e-9 * (big + size), inv)
     })
+}
+
+/// Whether `[lo − m, hi + m]` (backdrop units; `inv` is one over the square
+/// size) lies inside one checker square, within the exact range of the
+/// floors (NaN fails the range test).
+fn box_in_one_square(lo: f64, hi: f64, m: f64, inv: f64) -> bool {
+    let (a, b) = ((lo - m) * inv, (hi + m) * inv);
+    a.abs() < 4.0e15 && b.abs() < 4.0e15 && floor_fast(a) == floor_fast(b)
+}
+
+/// The arithmetic [`footprint_box`] needs: the `f64` test and the `f32` row
+/// pass compute the same bound.
+trait Real:
+    Copy
+    + PartialOrd
+    + std::ops::Add<Output = Self>
+    + std::ops::Sub<Output = Self>
+    + std::ops::Mul<Output = Self>
+{
+    /// `v`, exactly (the constants used are dyadic).
+    fn of(v: f32) -> Self;
+    fn abs(self) -> Self;
+}
+
+impl Real for f64 {
+    #[inline(always)]
+    fn of(v: f32) -> f64 {
+        v as f64
+    }
+    #[inline(always)]
+    fn abs(self) -> f64 {
+        f64::abs(self)
+    }
+}
+
+impl Real for f32 {
+    #[inline(always)]
+    fn of(v: f32) -> f32 {
+        v
+    }
+    #[inline(always)]
+    fn abs(self) -> f32 {
+        f32::abs(self)
+    }
+}
+
+/// `max`/`min` as a compare and select (NaN-blind: callers rule NaN out).
+#[inline(always)]
+fn maxr<R: Real>(a: R, b: R) -> R {
+    if a > b { a } else { b }
+}
+
+#[inline(always)]
+fn minr<R: Real>(a: R, b: R) -> R {
+    if a < b { a } else { b }
+}
+
+/// One coordinate of the bicubic map over a pixel, from its 5×5 grid
+/// `at(j, i)` (see [`bicubic_in_one_square`] for why): `(lo, hi)`, the box of
+/// the bilinear map at the pixel's corners, edge midpoints and centre; `bend`,
+/// how far the bicubic map strays from it; and the grid's largest `|value|`,
+/// to scale the rounding slack by.
+#[inline(always)]
+fn footprint_box<R: Real>(at: impl Fn(usize, usize) -> R) -> (R, R, R, R) {
+    let zero = R::of(0.0);
+    let mut big = zero;
+    for j in 0..5 {
+        for i in 0..5 {
+            big = maxr(big, at(j, i).abs());
+        }
+    }
+    // Largest |second difference| across x (dx) and down y (dy), at the 3×3
+    // centres of all five rows or columns (`…5`) or of the middle three
+    // (`…3`).
+    let two = R::of(2.0);
+    let (mut dx5, mut dx3, mut dy5, mut dy3) = (zero, zero, zero, zero);
+    for a in 0..5 {
+        for b in 1..4 {
+            let ddx = (at(a, b - 1) - two * at(a, b) + at(a, b + 1)).abs();
+            let ddy = (at(b - 1, a) - two * at(b, a) + at(b + 1, a)).abs();
+            dx5 = maxr(dx5, ddx);
+            dy5 = maxr(dy5, ddy);
+            if (1..4).contains(&a) {
+                dx3 = maxr(dx3, ddx);
+                dy3 = maxr(dy3, ddy);
+            }
+        }
+    }
+    let (eighth, five_32) = (R::of(0.125), R::of(5.0 / 32.0));
+    let bend = minr(dy3 * eighth + dx5 * five_32, dx3 * eighth + dy5 * five_32);
+    let (half, quarter) = (R::of(0.5), R::of(0.25));
+    let c = at(2, 2);
+    let (mut lo, mut hi) = (c, c);
+    for (sy, sx) in [(1, 1), (1, 3), (3, 1), (3, 3)] {
+        let (ex, ey) = (at(2, sx), at(sy, 2));
+        for p in [
+            half * (c + ex),
+            half * (c + ey),
+            quarter * ((c + ex) + (ey + at(sy, sx))),
+        ] {
+            lo = minr(lo, p);
+            hi = maxr(hi, p);
+        }
+    }
+    (lo, hi, bend, big)
 }
 
 /// The larger side of the bounding box of the map at the pixel's centre,
@@ -908,16 +970,6 @@ fn load(v: &[f32], at: usize) -> Lane {
     }
 }
 
-#[inline(always)]
-fn maxf(a: f32, b: f32) -> f32 {
-    if a > b { a } else { b }
-}
-
-#[inline(always)]
-fn minf(a: f32, b: f32) -> f32 {
-    if a < b { a } else { b }
-}
-
 /// The body of [`interior_row`] for row `y` (two rows inside the film):
 /// pixel `x = i + 2` is lane `i − i0` of the chunk starting at `i0`, and
 /// `g[j][d]` holds the hits at row `y + j − 2`, column `x + d − 2`.
@@ -956,46 +1008,7 @@ fn interior_row_in(film: &Film, y: usize, size: f64, out: &mut [Interior]) {
             let g: [[Lane; 5]; 5] =
                 std::array::from_fn(|j| std::array::from_fn(|d| load(qk[j], i0 + d)));
             for l in 0..LANES {
-                let at = |j: usize, d: usize| g[j][d][l];
-                let mut big = 0.0f32;
-                for j in 0..5 {
-                    for d in 0..5 {
-                        big = maxf(big, at(j, d).abs());
-                    }
-                }
-                // Largest |second difference| across x (dx) and down y (dy),
-                // at the 3×3 centres of all five rows or columns (`…5`) or
-                // of the middle three (`…3`).
-                let (mut dx5, mut dx3, mut dy5, mut dy3) = (0.0f32, 0.0f32, 0.0f32, 0.0f32);
-                for a in 0..5 {
-                    for b in 1..4 {
-                        let ddx = (at(a, b - 1) - 2.0 * at(a, b) + at(a, b + 1)).abs();
-                        let ddy = (at(b - 1, a) - 2.0 * at(b, a) + at(b + 1, a)).abs();
-                        dx5 = maxf(dx5, ddx);
-                        dy5 = maxf(dy5, ddy);
-                        if (1..4).contains(&a) {
-                            dx3 = maxf(dx3, ddx);
-                            dy3 = maxf(dy3, ddy);
-                        }
-                    }
-                }
-                let bend = minf(
-                    dy3 * 0.125 + dx5 * (5.0 / 32.0),
-                    dx3 * 0.125 + dy5 * (5.0 / 32.0),
-                );
-                let c = at(2, 2);
-                let (mut lo, mut hi) = (c, c);
-                for (sy, sx) in [(1, 1), (1, 3), (3, 1), (3, 3)] {
-                    let (ex, ey) = (at(2, sx), at(sy, 2));
-                    for p in [
-                        0.5 * (c + ex),
-                        0.5 * (c + ey),
-                        0.25 * ((c + ex) + (ey + at(sy, sx))),
-                    ] {
-                        lo = minf(lo, p);
-                        hi = maxf(hi, p);
-                    }
-                }
+                let (lo, hi, bend, big) = footprint_box(|j, d| g[j][d][l]);
                 let m = bend + 1e-5 * big + slack;
                 let (a, b) = ((lo - m) * inv, (hi + m) * inv);
                 one[l] &= (a.abs() < 1e15) & (b.abs() < 1e15) & (a.floor() == b.floor());
