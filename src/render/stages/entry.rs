@@ -4,7 +4,7 @@
 
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Queue, Rays};
-use super::{field_minus_iso, place};
+use super::{field_minus_iso, move_walk, place};
 use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 use crate::roots::inside;
@@ -58,20 +58,6 @@ pub fn entry<const S: usize, T: Coefficient>(
             }
         }
     }
-}
-
-/// Moves ray `i`'s walk (not its piece) to parameter `t`, in the cell there.
-fn move_walk<T: Coefficient>(ctx: &Ctx<T>, rays: &mut Rays, i: usize, t: f64) {
-    let p = ctx.to_grid(rays.origin(i) + t * rays.direction(i));
-    rays.t[i] = t;
-    rays.set_cell(
-        i,
-        [
-            ctx.lattice.cell_of(0, p.x),
-            ctx.lattice.cell_of(1, p.y),
-            ctx.lattice.cell_of(2, p.z),
-        ],
-    );
 }
 
 /// Sets ray `i`'s medium from the field at the start of its first piece,

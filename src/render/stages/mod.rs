@@ -45,20 +45,30 @@ pub(crate) fn place<const S: usize, T: Coefficient>(
         rays.cell_dir[a][i] = dg[a];
         rays.cell_inv[a][i] = if dg[a] != 0.0 { 1.0 / dg[a] } else { 0.0 };
     }
-    let p = ctx.to_grid(rays.origin(i) + t * rays.direction(i));
-    rays.t[i] = t;
     rays.t_start[i] = t;
     rays.t_end[i] = t_end;
     rays.advance[i] = false;
-    let cell = [
-        ctx.lattice.cell_of(0, p.x),
-        ctx.lattice.cell_of(1, p.y),
-        ctx.lattice.cell_of(2, p.z),
-    ];
-    rays.set_cell(i, cell);
+    let p = move_walk(ctx, rays, i, t);
     if ctx.traversal() == Traversal::Step {
         rays.seg_g[0][i] = field_minus_iso::<S, _>(ctx, p, c);
     }
+}
+
+/// Moves ray `i`'s walk (not its piece) to parameter `t`, in the cell
+/// there; returns that point in grid coordinates.
+#[inline(always)]
+pub(crate) fn move_walk<T: Coefficient>(ctx: &Ctx<T>, rays: &mut Rays, i: usize, t: f64) -> DVec3 {
+    let p = ctx.to_grid(rays.origin(i) + t * rays.direction(i));
+    rays.t[i] = t;
+    rays.set_cell(
+        i,
+        [
+            ctx.lattice.cell_of(0, p.x),
+            ctx.lattice.cell_of(1, p.y),
+            ctx.lattice.cell_of(2, p.z),
+        ],
+    );
+    p
 }
 
 /// `f(p) - iso` at a grid point, clamped into the domain.
