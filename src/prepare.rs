@@ -15,7 +15,7 @@
 use std::collections::HashMap;
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};
-use std::sync::{Arc, OnceLock};
+use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
 use crate::classify::{self, CurvatureBounds, Method, SubCellMasks, TaggedIndex, Tags, curvature};
@@ -49,6 +49,9 @@ pub struct Accel {
     proximity: OnceLock<Proximity>,
     tagged: OnceLock<Arc<TaggedIndex>>,
     masks: OnceLock<Option<SubCellMasks>>,
+    /// The masks the classification found along with the tags (by linear
+    /// cell index), until [`Accel::masks`] files them by slot.
+    found_masks: Mutex<Option<classify::masks::LinearMasks>>,
     curvature: OnceLock<Option<CurvatureBounds>>,
 }
 
@@ -105,13 +108,27 @@ impl Accel {
     /// `None`) and the build time.
     pub fn masks(&self, field: &AnyField) -> (Option<&SubCellMasks>, f64) {
         let (m, s) = timed_once(&self.masks, || {
+            // Taken whatever happens, so an unused find is not kept.
+            let found = self
+                .found_masks
+                .lock()
+                .unwrap_or_else(|e| e.into_inner())
+                .take();
             let count = self.octree.tags().count();
-            (matches!(self.method, Method::Bezier(_))
+            if !(matches!(self.method, Method::Bezier(_))
                 && self.table_fits(SubCellMasks::bytes_for(count)))
-            .then(|| {
-                let iso = field.separating_iso(self.iso);
-                with_field!(field, f => SubCellMasks::build(f.as_ref(), self.tagged(), iso))
-            })
+            {
+                return None;
+            }
+            let cells = self.octree.tags().cells;
+            found
+                .and_then(|linear| SubCellMasks::from_linear(self.tagged(), cells, &linear))
+                .or_else(|| {
+                    let iso = field.separating_iso(self.iso);
+                    Some(with_field!(field, f => {
+                        SubCellMasks::build(f.as_ref(), self.tagged(), iso)
+                    }))
+                })
         });
         (m.as_ref(), s)
     }
@@ -266,10 +283,16 @@ fn build_accel(
     tags: Option<Tags>,
 ) -> (Accel, f64, f64) {
     let start = Instant::now();
-    let tags = tags.unwrap_or_else(|| {
-        let iso = field.separating_iso(iso);
-        with_field!(field, f => classify::classify(f.as_ref(), iso, method).tags)
-    });
+    let (tags, found_masks) = match tags {
+        Some(tags) => (tags, None),
+        None => {
+            let iso = field.separating_iso(iso);
+            let (c, masks) = with_field!(field, f => {
+                classify::classify_with_masks(f.as_ref(), iso, method, TABLE_BUDGET)
+            });
+            (c.tags, masks)
+        }
+    };
     let classify_s = start.elapsed().as_secs_f64();
     let start = Instant::now();
     let octree = Octree::build(tags);
@@ -281,6 +304,7 @@ fn build_accel(
             proximity: OnceLock::new(),
             tagged: OnceLock::new(),
             masks: OnceLock::new(),
+            found_masks: Mutex::new(found_masks),
             curvature: OnceLock::new(),
         },
         classify_s,

@@ -16,7 +16,8 @@ use crate::filter::coeffs::Coefficient;
 use crate::filter::kernel::binomial;
 use crate::lattice::Lattice;
 
-use super::{Tags, refine_cells, slack, support_minus_iso};
+use super::masks::LinearMasks;
+use super::{Tags, refine_cells, slack, support_minus_iso, support_minus_iso_into};
 
 /// What the recursion learned about a cell.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -54,17 +55,27 @@ pub fn cell_bernstein<T: Coefficient>(
     iso: f64,
     beta: &[f64],
 ) -> Vec<f64> {
-    let c = support_minus_iso(field, cell, iso);
+    let mut c = support_minus_iso(field, cell, iso);
+    let mut x = vec![0.0; c.len()];
     crate::with_support!(field.kernel().support(), S => {
-        // m[p][i] = β[i][p]: row p of the map from coefficients to Bernstein.
-        let m: [[f64; S]; S] = std::array::from_fn(|p| std::array::from_fn(|i| beta[i * S + p]));
-        let mut x = vec![0.0; S * S * S];
-        let mut y = vec![0.0; S * S * S];
-        apply_axis::<S>(&c, &mut x, 1, &m);
-        apply_axis::<S>(&x, &mut y, S, &m);
-        apply_axis::<S>(&y, &mut x, S * S, &m);
-        x
-    })
+        bernstein_in_place::<S>(&mut c, &mut x, &rows::<S>(beta))
+    });
+    c
+}
+
+/// `m[p][i] = β[i][p]`: row `p` of the map from coefficients to Bernstein.
+fn rows<const S: usize>(beta: &[f64]) -> [[f64; S]; S] {
+    std::array::from_fn(|p| std::array::from_fn(|i| beta[i * S + p]))
+}
+
+/// Coefficients `c` (an `S³` tensor) to their tensor Bernstein form, in
+/// place, through scratch `x`.
+#[inline(always)]
+fn bernstein_in_place<const S: usize>(c: &mut [f64], x: &mut [f64], m: &[[f64; S]; S]) {
+    apply_axis::<S>(c, x, 1, m);
+    apply_axis::<S>(x, c, S, m);
+    apply_axis::<S>(c, x, S * S, m);
+    c[..S * S * S].copy_from_slice(&x[..S * S * S]);
 }
 
 /// de Casteljau split at 1/2 along `axis` (the sub-cell masks' halving, for
@@ -90,7 +101,10 @@ pub const SUB: usize = 4;
 /// part from the first to the last tagged sub-cell is solved.
 pub struct SubCells {
     s: usize,
+    /// The filter's weights in the Bernstein basis ([`bernstein_weights`]).
+    beta: Vec<f64>,
     /// Scratch tensors (reused between cells, never read before written).
+    patch: Vec<f64>,
     halves: Vec<f64>,
     quarters: Vec<f64>,
     x: Vec<f64>,
@@ -101,9 +115,12 @@ pub struct SubCells {
 const MAX_TENSOR: usize = 512;
 
 impl SubCells {
-    pub fn new(support: usize) -> SubCells {
+    /// Scratch for the masks of `field`'s cells.
+    pub fn new<T: Coefficient>(field: &Field<T>) -> SubCells {
         SubCells {
-            s: support,
+            s: field.kernel().support(),
+            beta: bernstein_weights(field),
+            patch: vec![0.0; MAX_TENSOR],
             halves: vec![0.0; 8 * MAX_TENSOR],
             quarters: vec![0.0; 8 * MAX_TENSOR],
             x: vec![0.0; 2 * MAX_TENSOR],
@@ -120,17 +137,31 @@ impl SubCells {
         crate::with_support!(self.s, S => self.mask_s::<S>(b, eps))
     }
 
+    /// The sub-cell mask of `cell` of `field` (the one [`SubCells::new`] was
+    /// made for) for the iso-value `iso`: [`cell_bernstein`] and
+    /// [`SubCells::mask`] without allocating.
+    #[inline(always)]
+    pub fn cell_mask<T: Coefficient>(
+        &mut self,
+        field: &Field<T>,
+        cell: [i64; 3],
+        iso: f64,
+        eps: f64,
+    ) -> u64 {
+        crate::with_support!(self.s, S => {
+            let mut patch = std::mem::take(&mut self.patch);
+            support_minus_iso_into(field, cell, iso, &mut patch);
+            bernstein_in_place::<S>(&mut patch, &mut self.x, &rows::<S>(&self.beta));
+            let mask = self.mask_s::<S>(&patch, eps);
+            self.patch = patch;
+            mask
+        })
+    }
+
+    #[inline(always)]
     fn mask_s<const S: usize>(&mut self, b: &[f64], eps: f64) -> u64 {
         let n = S * S * S;
-        let straddles = |v: &[f64]| {
-            let (mut above, mut below) = (false, false);
-            for &x in &v[..n] {
-                above |= x > -eps;
-                below |= x <= eps;
-            }
-            above && below
-        };
-        if !straddles(b) {
+        if !straddles(&b[..n], eps) {
             return 0;
         }
         let mut mask = 0u64;
@@ -138,13 +169,13 @@ impl SubCells {
         octants::<S>(b, x, y, &mut self.halves);
         for h in 0..8 {
             let half = &self.halves[h * n..(h + 1) * n];
-            if !straddles(half) {
+            if !straddles(half, eps) {
                 continue;
             }
             octants::<S>(half, x, y, &mut self.quarters);
             let (hx, hy, hz) = (h & 1, h >> 1 & 1, h >> 2);
             for q in 0..8 {
-                if straddles(&self.quarters[q * n..(q + 1) * n]) {
+                if straddles(&self.quarters[q * n..(q + 1) * n], eps) {
                     let (i, j, k) = (2 * hx + (q & 1), 2 * hy + (q >> 1 & 1), 2 * hz + (q >> 2));
                     mask |= 1 << (i + SUB * (j + SUB * k));
                 }
@@ -154,10 +185,31 @@ impl SubCells {
     }
 }
 
+/// Whether the hull of coefficients `v` reaches both sides of the iso-value
+/// (within the slack `eps`): some `v > -eps` and some `v <= eps`, as
+/// [`decide`] tests, from the extremes (lanes of 8, which vectorise; a NaN is
+/// ignored either way).
+#[inline(always)]
+fn straddles(v: &[f64], eps: f64) -> bool {
+    let (mut lo, mut hi) = ([f64::INFINITY; 8], [f64::NEG_INFINITY; 8]);
+    let mut chunks = v.chunks_exact(8);
+    for c in &mut chunks {
+        for l in 0..8 {
+            lo[l] = if c[l] < lo[l] { c[l] } else { lo[l] };
+            hi[l] = if c[l] > hi[l] { c[l] } else { hi[l] };
+        }
+    }
+    for (l, &x) in chunks.remainder().iter().enumerate() {
+        lo[l] = if x < lo[l] { x } else { lo[l] };
+        hi[l] = if x > hi[l] { x } else { hi[l] };
+    }
+    lo.iter().any(|&x| x <= eps) && hi.iter().any(|&x| x > -eps)
+}
+
 /// The 8 half-size children of an `S³` Bernstein patch into `out` (child
 /// `x + 2y + 4z` at `out[child·S³..]`), through scratch `x` (2 tensors) and
 /// `y` (4 tensors).
-#[inline]
+#[inline(always)]
 fn octants<const S: usize>(b: &[f64], x: &mut [f64], y: &mut [f64], out: &mut [f64]) {
     let n = S * S * S;
     let (x0, x1) = x[..2 * n].split_at_mut(n);
@@ -185,22 +237,32 @@ fn octants<const S: usize>(b: &[f64], x: &mut [f64], y: &mut [f64], out: &mut [f
 
 /// de Casteljau at 1/2 along the axis of `stride` (1, S or S²) of an `S³`
 /// tensor: `left` covers `[0, 1/2]`, `right` `[1/2, 1]` on that axis.
+///
+/// Along y and z the `S` slices of a block are runs of `stride` contiguous
+/// values, halved together (vector lanes); along x each line is one block.
 #[inline(always)]
 fn halve_into<const S: usize>(src: &[f64], stride: usize, left: &mut [f64], right: &mut [f64]) {
-    let outer = S * S * S / (stride * S);
-    for o in 0..outer {
-        for inner in 0..stride {
-            let base = o * stride * S + inner;
-            let mut w: [f64; S] = std::array::from_fn(|q| src[base + q * stride]);
-            left[base] = w[0];
-            right[base + (S - 1) * stride] = w[S - 1];
-            for r in 1..S {
-                for i in 0..S - r {
-                    w[i] = 0.5 * (w[i] + w[i + 1]);
+    let block = stride * S;
+    let mut w = [0.0f64; MAX_TENSOR];
+    for start in (0..S * S * S).step_by(block) {
+        let w = &mut w[..block];
+        w.copy_from_slice(&src[start..start + block]);
+        let (l, r) = (
+            &mut left[start..start + block],
+            &mut right[start..start + block],
+        );
+        l[..stride].copy_from_slice(&w[..stride]);
+        r[(S - 1) * stride..].copy_from_slice(&w[(S - 1) * stride..]);
+        for round in 1..S {
+            for i in 0..S - round {
+                let (a, b) = w[i * stride..(i + 2) * stride].split_at_mut(stride);
+                for (x, y) in a.iter_mut().zip(b.iter()) {
+                    *x = 0.5 * (*x + *y);
                 }
-                left[base + r * stride] = w[0];
-                right[base + (S - 1 - r) * stride] = w[S - 1 - r];
             }
+            l[round * stride..(round + 1) * stride].copy_from_slice(&w[..stride]);
+            let k = S - 1 - round;
+            r[k * stride..(k + 1) * stride].copy_from_slice(&w[k * stride..(k + 1) * stride]);
         }
     }
 }
@@ -227,9 +289,7 @@ fn apply_axis<const S: usize>(src: &[f64], dst: &mut [f64], stride: usize, m: &[
 
 /// Decides a Bernstein patch, subdividing up to `depth` times.
 pub fn decide(b: &[f64], s: usize, depth: u8, eps: f64) -> Verdict {
-    let above = b.iter().any(|&v| v > -eps);
-    let below = b.iter().any(|&v| v <= eps);
-    if !above || !below {
+    if !straddles(b, eps) {
         return Verdict::NoCrossing;
     }
     let corner =
@@ -296,6 +356,65 @@ pub fn refine<T: Coefficient>(
     })
 }
 
+/// The Bézier classification at depth 2 ([`refine`] with
+/// `Method::Bezier(2)`) together with every kept cell's sub-cell mask, by
+/// linear cell index (x fastest, ascending).
+///
+/// Depth 2 halves each cell twice per axis, as the masks do, and with the
+/// same arithmetic: a cell is kept exactly when its mask is not empty. (A
+/// crossing [`decide`] proves from a patch's corners lies in a sub-cell whose
+/// hull straddles the iso-value: corners survive halving unchanged,
+/// neighbouring sub-cells share their face coefficients bit for bit, and a
+/// child's hull lies in its parent's.) So one pass gives both, where the
+/// classification followed by [`crate::classify::SubCellMasks::build`]
+/// expanded and halved every tagged cell twice. Without `keep_masks` only the
+/// tags are returned.
+pub fn refine_with_masks<T: Coefficient>(
+    field: &Field<T>,
+    lattice: &Lattice,
+    iso: f64,
+    coarse: &Tags,
+    keep_masks: bool,
+) -> (Tags, LinearMasks) {
+    use rayon::prelude::*;
+    let eps = slack(field);
+    let [nx, ny, nz] = lattice.cells;
+    let slab = nx * ny;
+    let slabs: Vec<(Vec<u8>, LinearMasks)> = (0..nz)
+        .into_par_iter()
+        .map_init(
+            || SubCells::new(field),
+            |sub, z| {
+                let mut flags = vec![0u8; slab];
+                let mut masks = Vec::new();
+                // Compiled for the CPU's vector width (the same arithmetic).
+                crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
+                    for (i, flag) in flags.iter_mut().enumerate() {
+                        if coarse.get_index(z * slab + i) {
+                            let cell = [(i % nx) as i64, (i / nx) as i64, z as i64];
+                            let mask = sub.cell_mask(field, cell, iso, eps);
+                            if mask != 0 {
+                                *flag = 1;
+                                if keep_masks {
+                                    masks.push((z * slab + i, mask));
+                                }
+                            }
+                        }
+                    }
+                });
+                (flags, masks)
+            },
+        )
+        .collect();
+    let mut all = Vec::new();
+    let mut chunks = Vec::with_capacity(slabs.len());
+    for (flags, masks) in slabs {
+        chunks.push(flags);
+        all.extend(masks);
+    }
+    (Tags::from_chunks(lattice.cells, chunks), all)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -316,7 +435,7 @@ mod tests {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             let lat = Lattice::new(f.kernel(), dims);
             let beta = bernstein_weights(&f);
-            let mut sub = SubCells::new(f.kernel().support());
+            let mut sub = SubCells::new(&f);
             let iso = f.separating_iso(125.0);
             let origin_of = |c: [i64; 3]| c.map(|c| c as f64 - lat.offset);
             let (mut kept, mut total, mut sign_changes) = (0, 0, 0);
@@ -358,6 +477,51 @@ mod tests {
             assert!(sign_changes > 0, "{name}: the test must see crossings");
             assert!(kept < total, "{name}: the mask must exclude something");
         }
+    }
+
+    #[test]
+    fn one_pass_gives_the_depth_two_tags_and_their_masks() {
+        // Noise with a smooth trend: cells proven at the root, at a half,
+        // at a quarter, undecided and empty all occur.
+        let dims = [12usize, 10, 11];
+        let s: Vec<f32> = (0..dims.iter().product::<usize>())
+            .map(|i| ((i * 7919 + 3) % 97) as f32 + (i % dims[0]) as f32 * 9.0)
+            .collect();
+        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let mut pruned = false;
+        for name in ["linear", "catmull-rom", "bspline2", "bspline3", "bspline5"] {
+            let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
+            let lat = Lattice::new(f.kernel(), dims);
+            let iso = f.separating_iso(100.0);
+            let coarse = crate::classify::prefilter_candidates(&f, &lat, iso);
+            let want = refine(&f, &lat, iso, &coarse, 2, false);
+            let (tags, masks) = refine_with_masks(&f, &lat, iso, &coarse, true);
+            assert_eq!(tags.count(), want.count(), "{name}");
+            assert!(
+                tags.is_subset_of(&want) && want.is_subset_of(&tags),
+                "{name}"
+            );
+            assert!(want.count() > 0, "{name}");
+            // Linear's hull is its corners: only higher orders prune.
+            pruned |= want.count() < coarse.count();
+            let beta = bernstein_weights(&f);
+            let mut sub = SubCells::new(&f);
+            assert_eq!(masks.len(), tags.count(), "{name}");
+            let [nx, ny, _] = lat.cells;
+            for &(i, mask) in &masks {
+                let c = [
+                    (i % nx) as i64,
+                    (i / nx % ny) as i64,
+                    (i / (nx * ny)) as i64,
+                ];
+                assert!(tags.get(c), "{name} {c:?}");
+                let b = cell_bernstein(&f, c, iso, &beta);
+                assert_eq!(mask, sub.mask(&b, slack(&f)), "{name} {c:?}");
+            }
+            let (_, none) = refine_with_masks(&f, &lat, iso, &coarse, false);
+            assert!(none.is_empty());
+        }
+        assert!(pruned, "the hull must drop some candidates");
     }
 
     #[test]

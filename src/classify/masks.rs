@@ -6,11 +6,16 @@
 
 use std::sync::Arc;
 
-use super::bezier::{SubCells, bernstein_weights, cell_bernstein};
+use super::bezier::SubCells;
 use super::slack;
 use super::tagged::TaggedIndex;
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
+
+/// Sub-cell masks by linear cell index (x fastest), ascending, as the
+/// classification finds them ([`crate::classify::bezier::refine_with_masks`])
+/// before the tagged cells have slots.
+pub type LinearMasks = Vec<(usize, u64)>;
 
 /// Sub-cell masks of the tagged cells of one classification.
 #[derive(Clone, Debug)]
@@ -35,14 +40,41 @@ impl SubCellMasks {
         index: Arc<TaggedIndex>,
         iso: f64,
     ) -> SubCellMasks {
-        let s = field.kernel().support();
-        let beta = bernstein_weights(field);
         let eps = slack(field);
         let masks = index.table_init(
-            || SubCells::new(s),
-            |sub, cell| sub.mask(&cell_bernstein(field, cell, iso, &beta), eps),
+            || SubCells::new(field),
+            |sub, cell| sub.cell_mask(field, cell, iso, eps),
         );
         SubCellMasks { index, masks }
+    }
+
+    /// The masks [`crate::classify::bezier::refine_with_masks`] found along
+    /// with the tags `index` was built from: `(linear cell index, mask)` for
+    /// the tagged cells of a lattice of `cells`; `None` unless every tagged
+    /// cell has exactly one.
+    pub fn from_linear(
+        index: Arc<TaggedIndex>,
+        cells: [usize; 3],
+        linear: &[(usize, u64)],
+    ) -> Option<SubCellMasks> {
+        if linear.len() != index.count() {
+            return None;
+        }
+        let mut masks = vec![0u64; index.count()];
+        let mut filled = vec![false; index.count()];
+        let [nx, ny, nz] = cells;
+        for &(i, mask) in linear {
+            if i >= nx * ny * nz {
+                return None;
+            }
+            let c = [i % nx, i / nx % ny, i / (nx * ny)].map(|v| v as i64);
+            let slot = index.slot(c)?;
+            if std::mem::replace(&mut filled[slot], true) {
+                return None;
+            }
+            masks[slot] = mask;
+        }
+        Some(SubCellMasks { index, masks })
     }
 
     /// The mask of cell `c` (in range); `None` when the cell is not tagged.
@@ -55,9 +87,38 @@ impl SubCellMasks {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::classify::bezier::{bernstein_weights, cell_bernstein};
     use crate::classify::{Method, classify};
     use crate::filter::FilterKind;
     use crate::volume::{SampleType, Volume};
+
+    #[test]
+    fn masks_found_by_the_classification_file_into_their_slots() {
+        let dims = [11usize, 9, 10];
+        let s: Vec<f32> = (0..dims.iter().product::<usize>())
+            .map(|i| ((i * 7919 + 13) % 251) as f32)
+            .collect();
+        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let f = Field::new(&vol, FilterKind::BSpline(3));
+        let iso = f.separating_iso(120.0);
+        let (c, found) = crate::classify::classify_with_masks(&f, iso, Method::Bezier(2), 1 << 30);
+        let found = found.expect("within budget");
+        let index = Arc::new(TaggedIndex::build(&c.tags));
+        let filed = SubCellMasks::from_linear(index.clone(), c.tags.cells, &found).unwrap();
+        let built = SubCellMasks::build(&f, index.clone(), iso);
+        assert_eq!(filed.masks, built.masks);
+        // A list that is not one mask per tagged cell is refused.
+        assert!(SubCellMasks::from_linear(index.clone(), c.tags.cells, &found[1..]).is_none());
+        let mut twice = found.clone();
+        twice[1] = twice[0];
+        assert!(SubCellMasks::from_linear(index, c.tags.cells, &twice).is_none());
+        // No budget, no masks.
+        assert!(
+            crate::classify::classify_with_masks(&f, iso, Method::Bezier(2), 0)
+                .1
+                .is_none()
+        );
+    }
 
     #[test]
     fn every_tagged_cell_has_its_own_mask() {
@@ -71,7 +132,7 @@ mod tests {
         let tags = classify(&f, iso, Method::Bezier(2)).tags;
         let m = SubCellMasks::build(&f, Arc::new(TaggedIndex::build(&tags)), iso);
         let beta = bernstein_weights(&f);
-        let mut sub = SubCells::new(4);
+        let mut sub = SubCells::new(&f);
         let mut seen = 0;
         for z in 0..tags.cells[2] as i64 {
             for y in 0..tags.cells[1] as i64 {

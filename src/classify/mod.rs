@@ -144,6 +144,32 @@ pub fn classify<T: Coefficient>(field: &Field<T>, iso: f64, method: Method) -> C
     }
 }
 
+/// [`classify`], and for `Method::Bezier(2)` the sub-cell masks of the
+/// tagged cells found on the way ([`bezier::refine_with_masks`]; the same
+/// tags), by linear cell index, when they may fit `mask_budget` bytes
+/// (checked against the candidate cells, which bound the tagged ones).
+pub fn classify_with_masks<T: Coefficient>(
+    field: &Field<T>,
+    iso: f64,
+    method: Method,
+    mask_budget: usize,
+) -> (Classification, Option<masks::LinearMasks>) {
+    if method != Method::Bezier(2) {
+        return (classify(field, iso, method), None);
+    }
+    let start = Instant::now();
+    let lattice = Lattice::new(field.kernel(), field.dims());
+    let coarse = prefilter_candidates(field, &lattice, iso);
+    let keep_masks = coarse.count() * std::mem::size_of::<(usize, u64)>() <= mask_budget;
+    let (tags, masks) = bezier::refine_with_masks(field, &lattice, iso, &coarse, keep_masks);
+    let c = Classification {
+        method,
+        tags,
+        seconds: start.elapsed().as_secs_f64(),
+    };
+    (c, keep_masks.then_some(masks))
+}
+
 /// Slack that keeps bounds conservative under summation rounding.
 pub(crate) fn slack<T: Coefficient>(field: &Field<T>) -> f64 {
     1e-12 * field.max_abs_coeff().max(1.0)
@@ -152,7 +178,11 @@ pub(crate) fn slack<T: Coefficient>(field: &Field<T>) -> f64 {
 /// The cheapest valid candidate set: BMCC for non-negative kernels (the Bézier
 /// coefficients are convex combinations of the support, so they cannot leave
 /// its range), the Lebesgue range otherwise.
-fn prefilter_candidates<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Tags {
+pub(crate) fn prefilter_candidates<T: Coefficient>(
+    field: &Field<T>,
+    lattice: &Lattice,
+    iso: f64,
+) -> Tags {
     if field.kernel().is_nonnegative() {
         bmcc(field, lattice, iso)
     } else {
@@ -346,22 +376,33 @@ pub(crate) fn support_minus_iso<T: Coefficient>(
     cell: [i64; 3],
     iso: f64,
 ) -> Vec<f64> {
+    let s = field.kernel().support();
+    let mut out = vec![0.0; s * s * s];
+    support_minus_iso_into(field, cell, iso, &mut out);
+    out
+}
+
+/// [`support_minus_iso`] into the first `S³` entries of `out`.
+#[inline(always)]
+pub(crate) fn support_minus_iso_into<T: Coefficient>(
+    field: &Field<T>,
+    cell: [i64; 3],
+    iso: f64,
+    out: &mut [f64],
+) {
     let coeffs = field.coeffs();
     let s = field.kernel().support();
     let base = field.support_offset(cell);
     let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
     let data = coeffs.data();
-    let mut out = Vec::with_capacity(s * s * s);
     for k in 0..s {
         for j in 0..s {
-            out.extend(
-                data[base + j * sy + k * sz..][..s]
-                    .iter()
-                    .map(|c| c.to_f64() - iso),
-            );
+            let row = &data[base + j * sy + k * sz..][..s];
+            for (o, c) in out[s * (j + s * k)..][..s].iter_mut().zip(row) {
+                *o = c.to_f64() - iso;
+            }
         }
     }
-    out
 }
 
 /// Re-decides every tagged cell of `coarse` with `keep`, in parallel.

@@ -854,7 +854,7 @@ mod sub_cell_tests {
             let lat = Lattice::new(f.kernel(), dims);
             let iso = f.separating_iso(125.0);
             let beta = bernstein_weights(&f);
-            let mut sub = SubCells::new(f.kernel().support());
+            let mut sub = SubCells::new(&f);
             let basis = BernsteinBasis::new(3 * (f.kernel().support() - 1));
             let (mut checked, mut crossings) = (0, 0);
             for _ in 0..20000 {
