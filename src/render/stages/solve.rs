@@ -77,7 +77,8 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
     traverse: &mut Queue,
     c: &mut Counters,
 ) {
-    let mut stack: Vec<Interval> = Vec::with_capacity(64);
+    // Grown only by the rare lanes that need isolation.
+    let mut stack: Vec<Interval> = Vec::new();
     let d = ctx.basis.degree();
     for group in input.chunks(L) {
         let mut seg = LaneSegments::<L> {
