@@ -673,9 +673,18 @@ fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
         }
         PrssMap::Bicubic => return bicubic_in_one_square(g, size),
     }
-    let square = |h: [f64; 2]| (floor_fast(h[0] / size), floor_fast(h[1] / size));
-    let first = square(e[1][1]);
-    e.iter().flatten().all(|&h| square(h) == first)
+    // The box of the nine points, widened for the rounding of the points
+    // and of the sub-points evaluated in it, as the bicubic test is.
+    let inv = 1.0 / size;
+    (0..2).all(|k| {
+        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+        for h in e.iter().flatten() {
+            lo = lo.min(h[k]);
+            hi = hi.max(h[k]);
+        }
+        let big = lo.abs().max(hi.abs());
+        lo.is_finite() && hi.is_finite() && box_in_one_square(lo, hi, 1e-9 * (big + size), inv)
+    })
 }
 
 /// [`in_one_square`] for the bicubic map, from the pixel's own footprint.
@@ -1512,6 +1521,28 @@ mod tests {
             claimed > 100 && row_claimed > 50,
             "the shortcut fires: {claimed}, the row pass: {row_claimed}"
         );
+    }
+
+    #[test]
+    fn one_square_test_keeps_off_square_edges() {
+        // A flat map a rounding error away from a square's edge: every test
+        // refuses it (sub-points are evaluated by other arithmetic and may
+        // land on the other side), though the nine points share a square.
+        let size = 0.1;
+        for edge in [3.0f64 * size, -7.0 * size, 1.0e6 * size] {
+            for off in [-1e-13f64, 1e-13] {
+                let p = edge + off * edge.abs().max(1.0);
+                let g: Grid = [[[p, 0.55 * size]; 5]; 5];
+                for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
+                    assert!(!in_one_square(&g, map, size), "{map:?} at {p}");
+                }
+                // Well inside a square the claim stands.
+                let g: Grid = [[[edge + 0.5 * size, 0.55 * size]; 5]; 5];
+                for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
+                    assert!(in_one_square(&g, map, size), "{map:?} inside");
+                }
+            }
+        }
     }
 
     /// A film of two flat pieces split by the line `x + slope·y = b` (image
