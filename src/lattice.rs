@@ -101,12 +101,29 @@ impl Bricked {
     /// The cell in slot `i` (possibly a padding cell outside the lattice).
     #[inline]
     pub fn cell(&self, i: usize) -> [usize; 3] {
-        let brick = i >> 6;
+        let o = self.brick_origin(i >> 6);
+        Bricked::cell_in(o, i & 63)
+    }
+
+    /// The first cell of brick `brick` (three divisions: loops over a
+    /// brick's 64 slots take it once and add [`Bricked::cell_in`]).
+    #[inline]
+    pub fn brick_origin(&self, brick: usize) -> [usize; 3] {
         let (bx, by) = (self.bricks[0], self.bricks[1]);
         [
-            (brick % bx) * 4 + (i & 3),
-            (brick / bx % by) * 4 + (i >> 2 & 3),
-            (brick / (bx * by)) * 4 + (i >> 4 & 3),
+            (brick % bx) * 4,
+            (brick / bx % by) * 4,
+            (brick / (bx * by)) * 4,
+        ]
+    }
+
+    /// Cell `k` (0..64) of the brick starting at `origin`.
+    #[inline(always)]
+    pub fn cell_in(origin: [usize; 3], k: usize) -> [usize; 3] {
+        [
+            origin[0] + (k & 3),
+            origin[1] + (k >> 2 & 3),
+            origin[2] + (k >> 4 & 3),
         ]
     }
 }

@@ -32,8 +32,9 @@ impl TaggedIndex {
         let bricked = Bricked::new(tags.cells);
         let mut words = vec![0u64; bricked.len() / 64];
         words.par_iter_mut().enumerate().for_each(|(brick, w)| {
+            let origin = bricked.brick_origin(brick);
             for k in 0..64 {
-                let c = bricked.cell(brick * 64 + k);
+                let c = Bricked::cell_in(origin, k);
                 if (0..3).all(|a| c[a] < tags.cells[a]) && tags.get(c.map(|v| v as i64)) {
                     *w |= 1 << k;
                 }

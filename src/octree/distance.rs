@@ -118,15 +118,18 @@ impl Proximity {
     }
 }
 
-/// An x-fastest map in the bricked layout.
+/// An x-fastest map in the bricked layout: a brick's rows of 4 cells are
+/// contiguous in both, so rows move 4 bytes at a time.
 fn to_bricked(cells: [usize; 3], linear: &[u8]) -> Vec<u8> {
     let bricked = Bricked::new(cells);
     let [nx, ny, nz] = cells;
     let mut out = vec![0u8; bricked.len()];
     for z in 0..nz {
         for y in 0..ny {
-            for x in 0..nx {
-                out[bricked.index([x as i64, y as i64, z as i64])] = linear[x + nx * (y + ny * z)];
+            let row = &linear[nx * (y + ny * z)..][..nx];
+            for (x0, run) in row.chunks(4).enumerate() {
+                let at = bricked.index([4 * x0 as i64, y as i64, z as i64]);
+                out[at..at + run.len()].copy_from_slice(run);
             }
         }
     }
@@ -163,12 +166,15 @@ fn octant_map(tags: &Tags, o: usize) -> Vec<u8> {
         }
     };
     let row = |y: usize, z: usize| nx * (y + ny * z);
+    // G(x): the three final neighbours at the same x; F(x) = min(G(x),
+    // G(x ahead)), the six of them; `tagged` the row's tags.
     let mut g = vec![255u8; nx];
+    let mut f = vec![255u8; nx];
+    let mut tagged = vec![false; nx];
     for &z in &order(nz, neg[2]) {
         let za = ahead(z, nz, neg[2]);
         for &y in &order(ny, neg[1]) {
             let ya = ahead(y, ny, neg[1]);
-            // G(x): the three final neighbours at the same x.
             g.fill(255);
             let mut take = |r: usize| {
                 for (gx, &v) in g.iter_mut().zip(&d[r..r + nx]) {
@@ -185,19 +191,33 @@ fn octant_map(tags: &Tags, o: usize) -> Vec<u8> {
                 }
             }
             let base = row(y, z);
-            let mut prev: Option<usize> = None;
-            for &x in &order(nx, neg[0]) {
-                // F(x) = min(G(x), G(x ahead)); then the row scan.
-                let mut m = g[x];
-                if let Some(xa) = prev {
-                    m = m.min(g[xa]).min(d[base + xa]);
+            for (x, t) in tagged.iter_mut().enumerate() {
+                *t = tags.get_index(base + x);
+            }
+            let out = &mut d[base..base + nx];
+            // The row scan, from the cell ahead: D(x) = 1 + min(F(x), D(x ahead)).
+            if neg[0] {
+                f[0] = g[0];
+                for x in 1..nx {
+                    f[x] = g[x].min(g[x - 1]);
                 }
-                d[base + x] = if tags.get_index(base + x) {
-                    0
-                } else {
-                    m.saturating_add(1)
-                };
-                prev = Some(x);
+                let mut last = 255u8;
+                for x in 0..nx {
+                    let v = f[x].min(last).saturating_add(1);
+                    last = if tagged[x] { 0 } else { v };
+                    out[x] = last;
+                }
+            } else {
+                f[nx - 1] = g[nx - 1];
+                for x in 0..nx - 1 {
+                    f[x] = g[x].min(g[x + 1]);
+                }
+                let mut last = 255u8;
+                for x in (0..nx).rev() {
+                    let v = f[x].min(last).saturating_add(1);
+                    last = if tagged[x] { 0 } else { v };
+                    out[x] = last;
+                }
             }
         }
     }

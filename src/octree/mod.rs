@@ -227,19 +227,24 @@ fn flatten(tags: &Tags, levels: &[Level], bricked: &Bricked) -> Vec<u8> {
     skip.par_chunks_mut(64)
         .enumerate()
         .for_each(|(brick, out)| {
+            let origin = bricked.brick_origin(brick);
+            // Blocks of 4 cells and more (levels from 1) hold the whole
+            // brick: their walk is the same for its 64 cells.
+            let mut shared = 1.min(top);
+            while shared < top && !levels[shared].get(origin.map(|v| v >> (shared + 1))) {
+                shared += 1;
+            }
             for (k, o) in out.iter_mut().enumerate() {
-                let c = bricked.cell(brick * 64 + k);
+                let c = Bricked::cell_in(origin, k);
                 if (0..3).any(|a| c[a] >= tags.cells[a]) {
                     continue; // padding: never visited
                 }
                 *o = if tags.get(c.map(|v| v as i64)) {
                     TAGGED
+                } else if top == 0 || levels[0].get(c.map(|v| v >> 1)) {
+                    0
                 } else {
-                    let mut l = 0;
-                    while l < top && !levels[l].get(c.map(|v| v >> (l + 1))) {
-                        l += 1;
-                    }
-                    l as u8
+                    shared as u8
                 };
             }
         });
