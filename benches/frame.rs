@@ -16,6 +16,8 @@ use snell::scene::Scene;
 use snell::volume::LoadOptions;
 
 fn main() {
+    // As an interactive session would: frames reuse the last one's memory.
+    snell::heap::retain_freed_memory();
     let mut scene_path = PathBuf::from("scenes/sphere.toml");
     let mut sets = Vec::new();
     let mut frames = 10usize;

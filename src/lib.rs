@@ -18,6 +18,7 @@ pub mod classify;
 pub mod compare;
 pub mod film;
 pub mod filter;
+pub mod heap;
 pub mod lattice;
 pub mod octree;
 pub mod peer;

@@ -1,0 +1,45 @@
+//! The process heap across frames.
+//!
+//! A frame allocates the same buffers as the last one (tile outputs, the
+//! film, the PRSS images) and frees them at its end. glibc's defaults hand
+//! the freed top of the heap back to the kernel (above 128 KiB) and serve
+//! large buffers by fresh mappings, so the kernel faults in and zeroes the
+//! same pages again every frame: 4–6% of a glass-sphere frame on 2 threads
+//! (BENCHMARKS.md, steady-state frames). Programs that render frame after
+//! frame — the CLI, `cargo bench --bench frame`, an interactive embedder —
+//! call [`retain_freed_memory`] once at start.
+
+/// Heap memory a process may keep after freeing it, for the next frame.
+pub const RETAINED_BYTES: i32 = 1 << 30;
+
+/// Largest buffer served from the heap rather than its own mapping (glibc's
+/// ceiling for this setting); volumes and coefficient arrays stay mapped
+/// separately and go back to the kernel when dropped.
+pub const HEAP_BUFFER_BYTES: i32 = 32 << 20;
+
+/// Keeps freed memory in the process for reuse (glibc on Linux; elsewhere
+/// nothing to do). Returns whether the allocator took the settings.
+pub fn retain_freed_memory() -> bool {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    {
+        // SAFETY: mallopt only changes allocator parameters; any value is
+        // accepted or refused with a 0 return.
+        unsafe {
+            libc::mallopt(libc::M_TRIM_THRESHOLD, RETAINED_BYTES) == 1
+                && libc::mallopt(libc::M_MMAP_THRESHOLD, HEAP_BUFFER_BYTES) == 1
+        }
+    }
+    #[cfg(not(all(target_os = "linux", target_env = "gnu")))]
+    {
+        false
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    #[test]
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    fn glibc_takes_the_settings() {
+        assert!(super::retain_freed_memory());
+    }
+}
