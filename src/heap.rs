@@ -6,8 +6,10 @@
 //! large buffers by fresh mappings, so the kernel faults in and zeroes the
 //! same pages again every frame: 4–6% of a glass-sphere frame on 2 threads
 //! (BENCHMARKS.md, steady-state frames). Programs that render frame after
-//! frame — the CLI, `cargo bench --bench frame`, an interactive embedder —
-//! call [`retain_freed_memory`] once at start.
+//! frame — `cargo bench --bench frame`, an interactive embedder — call
+//! [`retain_freed_memory`] once at start. The CLI does not: its renders are
+//! single frames, and `snell bench` reports each configuration's peak
+//! resident memory, which memory kept from the one before would inflate.
 
 /// Heap memory a process may keep after freeing it, for the next frame.
 pub const RETAINED_BYTES: i32 = 1 << 30;
