@@ -290,13 +290,6 @@ fn render_field<T: Coefficient>(
     Frame { film, stats }
 }
 
-thread_local! {
-    /// Each worker's scratch arena for its tiles' rays and queues, kept
-    /// across tiles and frames: `map_init` made one per rayon split, whose
-    /// fresh chunks the kernel had to fault in again every frame.
-    static TILE_ARENA: std::cell::RefCell<Bump> = std::cell::RefCell::new(Bump::new());
-}
-
 /// Traces regions in parallel; results come back in region order.
 fn trace_regions<T: Coefficient>(
     ctx: &Ctx<T>,
@@ -307,11 +300,9 @@ fn trace_regions<T: Coefficient>(
 ) -> Vec<tile::TileOut> {
     regions
         .into_par_iter()
-        .map(|region| {
-            let out = TILE_ARENA.with_borrow_mut(|bump| {
-                bump.reset();
-                with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S, _>(ctx, region, sampling, bump, traced))
-            });
+        .map_init(Bump::new, |bump, region| {
+            bump.reset();
+            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S, _>(ctx, region, sampling, bump, traced));
             if let Some(p) = progress {
                 p.fetch_add(1, Ordering::Relaxed);
             }
