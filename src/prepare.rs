@@ -104,8 +104,9 @@ impl Accel {
 
     /// Sub-cell masks of the tagged cells, built on first use for the
     /// Bézier classification when they fit [`TABLE_BUDGET`] (the paper's BMCC
-    /// and ACCC are measured at their own resolution); returns them (or
-    /// `None`) and the build time.
+    /// and ACCC are measured at their own resolution): filed from those the
+    /// classification found, or computed when the tags came from the disk
+    /// cache; returns them (or `None`) and the build time.
     pub fn masks(&self, field: &AnyField) -> (Option<&SubCellMasks>, f64) {
         let (m, s) = timed_once(&self.masks, || {
             // Taken whatever happens, so an unused find is not kept.
