@@ -37,6 +37,20 @@ pub fn retain_freed_memory() -> bool {
     }
 }
 
+/// Hands the free memory inside the heap back to the kernel (glibc's
+/// `malloc_trim`; elsewhere nothing to do). Preparation frees large
+/// transients in the worker threads' arenas — per-slab classification
+/// results, linear distance maps before bricking — which would otherwise stay
+/// resident: in `snell bench`'s scaling suite they raised the image-size
+/// rows' peak from 139 to 522 MiB after the 1024³ rows.
+pub fn release_free_memory() {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    // SAFETY: malloc_trim only returns free pages to the kernel.
+    unsafe {
+        libc::malloc_trim(0);
+    }
+}
+
 #[cfg(test)]
 mod tests {
     #[test]

@@ -460,6 +460,11 @@ impl Cache {
             times,
         };
         p.ready_for(&scene.render);
+        let t = &p.times;
+        if t.load_s + t.prefilter_s + t.classify_s + t.octree_s > 0.0 {
+            // Something was built: its transients go back to the kernel.
+            crate::heap::release_free_memory();
+        }
         Ok(p)
     }
 
