@@ -4,7 +4,7 @@
 //! film, the PRSS images) and frees them at its end. glibc's defaults hand
 //! the freed top of the heap back to the kernel (above 128 KiB) and serve
 //! large buffers by fresh mappings, so the kernel faults in and zeroes the
-//! same pages again every frame: 4–6% of a glass-sphere frame on 2 threads
+//! same pages again every frame: 3–6% of a glass-sphere frame on 2 threads
 //! (BENCHMARKS.md, steady-state frames). Programs that render frame after
 //! frame — `cargo bench --bench frame`, an interactive embedder — call
 //! [`retain_freed_memory`] once at start. The CLI does not: its renders are
@@ -39,9 +39,8 @@ pub fn retain_freed_memory() -> bool {
 
 /// Hands the free memory inside the heap back to the kernel (glibc's
 /// `malloc_trim`; elsewhere nothing to do). Preparation frees large
-/// transients in the worker threads' arenas — per-slab classification
-/// results, linear distance maps before bricking — which would otherwise stay
-/// resident: in `snell bench`'s scaling suite they raised the image-size
+/// transients in the worker threads' arenas (such as the classification's
+/// per-slab results) which would otherwise stay resident: in `snell bench`'s scaling suite they raised the image-size
 /// rows' peak from 139 to 522 MiB after the 1024³ rows.
 pub fn release_free_memory() {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]

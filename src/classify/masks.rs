@@ -92,8 +92,9 @@ mod tests {
     use crate::filter::FilterKind;
     use crate::volume::{SampleType, Volume};
 
-    #[test]
-    fn masks_found_by_the_classification_file_into_their_slots() {
+    /// A cubic B-spline field of scrambled samples and an iso-value
+    /// through it.
+    fn noisy_bspline3() -> (Field<f64>, f64) {
         let dims = [11usize, 9, 10];
         let s: Vec<f32> = (0..dims.iter().product::<usize>())
             .map(|i| ((i * 7919 + 13) % 251) as f32)
@@ -101,6 +102,12 @@ mod tests {
         let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
         let f = Field::new(&vol, FilterKind::BSpline(3));
         let iso = f.separating_iso(120.0);
+        (f, iso)
+    }
+
+    #[test]
+    fn masks_found_by_the_classification_file_into_their_slots() {
+        let (f, iso) = noisy_bspline3();
         let (c, found) = crate::classify::classify_with_masks(&f, iso, Method::Bezier(2), 1 << 30);
         let found = found.expect("within budget");
         let index = Arc::new(TaggedIndex::build(&c.tags));
@@ -122,13 +129,7 @@ mod tests {
 
     #[test]
     fn every_tagged_cell_has_its_own_mask() {
-        let dims = [11usize, 9, 10];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 13) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
-        let f = Field::new(&vol, FilterKind::BSpline(3));
-        let iso = f.separating_iso(120.0);
+        let (f, iso) = noisy_bspline3();
         let tags = classify(&f, iso, Method::Bezier(2)).tags;
         let m = SubCellMasks::build(&f, Arc::new(TaggedIndex::build(&tags)), iso);
         let beta = bernstein_weights(&f);
