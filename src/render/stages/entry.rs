@@ -4,7 +4,7 @@
 
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Queue, Rays};
-use super::{field_minus_iso, move_walk, place};
+use super::{field_minus_iso, place};
 use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 use crate::roots::inside;
@@ -42,10 +42,7 @@ pub fn entry<const S: usize, T: Coefficient>(
                     record.push(r);
                     continue;
                 }
-                place::<S, _>(ctx, rays, i, t0, t1, c);
-                if t_walk > t0 {
-                    move_walk(ctx, rays, i, t_walk);
-                }
+                place::<S, _>(ctx, rays, i, (t0, t_walk.max(t0)), t1, c);
                 if ctx.traversal() == Traversal::Step {
                     // `place` sampled the field at this very point (the
                     // march's first sample).

@@ -26,15 +26,17 @@ use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 use crate::scene::Traversal;
 
-/// Positions ray `i` at parameter `t` of its current piece (which must lie in
-/// the domain box up to `t_end`): sets its cell, and for step traversal the
-/// field value there (the start of the next bracket).
+/// Starts ray `i`'s current piece at parameter `t` (it must lie in the
+/// domain box up to `t_end`) and its walk at `t_walk ≥ t`, where the surface
+/// can first be: sets the walk's cell, and for step traversal (whose walk
+/// starts with its piece) the field value there (the start of the next
+/// bracket).
 #[inline]
 pub(crate) fn place<const S: usize, T: Coefficient>(
     ctx: &Ctx<T>,
     rays: &mut Rays,
     i: usize,
-    t: f64,
+    (t, t_walk): (f64, f64),
     t_end: f64,
     c: &mut Counters,
 ) {
@@ -48,7 +50,7 @@ pub(crate) fn place<const S: usize, T: Coefficient>(
     rays.t_start[i] = t;
     rays.t_end[i] = t_end;
     rays.advance[i] = false;
-    let p = move_walk(ctx, rays, i, t);
+    let p = move_walk(ctx, rays, i, t_walk);
     if ctx.traversal() == Traversal::Step {
         rays.seg_g[0][i] = field_minus_iso::<S, _>(ctx, p, c);
     }
@@ -57,7 +59,7 @@ pub(crate) fn place<const S: usize, T: Coefficient>(
 /// Moves ray `i`'s walk (not its piece) to parameter `t`, in the cell
 /// there; returns that point in grid coordinates.
 #[inline(always)]
-pub(crate) fn move_walk<T: Coefficient>(ctx: &Ctx<T>, rays: &mut Rays, i: usize, t: f64) -> DVec3 {
+fn move_walk<T: Coefficient>(ctx: &Ctx<T>, rays: &mut Rays, i: usize, t: f64) -> DVec3 {
     let p = ctx.to_grid(rays.origin(i) + t * rays.direction(i));
     rays.t[i] = t;
     rays.set_cell(

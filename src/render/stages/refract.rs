@@ -112,7 +112,7 @@ pub fn refract<const S: usize, T: Coefficient>(
         let eps = eps_vox / ctx.to_grid(new_dir).length();
         match ctx.clip(p, new_dir, 0.0) {
             Some((_, t1)) if t1 > eps => {
-                place::<S, _>(ctx, rays, i, eps, t1, c);
+                place::<S, _>(ctx, rays, i, (eps, eps), t1, c);
                 if let Some(bounds) = ctx.curvature
                     && q == pg.to_array()
                     && let Some(check) =
