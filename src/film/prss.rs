@@ -675,6 +675,9 @@ fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
     }
     // The box of the nine points, widened for the rounding of the points
     // and of the sub-points evaluated in it, as the bicubic test is.
+    // A NaN hit makes every point NaN (each is a sum over all 25 taps,
+    // zero weights included): the box stays empty (infinite bounds), which
+    // `box_in_one_square`'s range test refuses, as it does infinite hits.
     let inv = 1.0 / size;
     (0..2).all(|k| {
         let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
@@ -683,7 +686,7 @@ fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
             hi = hi.max(h[k]);
         }
         let big = lo.abs().max(hi.abs());
-        lo.is_finite() && hi.is_finite() && box_in_one_square(lo, hi, 1e-9 * (big + size), inv)
+        box_in_one_square(lo, hi, 1e-9 * (big + size), inv)
     })
 }
 
@@ -1536,10 +1539,18 @@ mod tests {
                 for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
                     assert!(!in_one_square(&g, map, size), "{map:?} at {p}");
                 }
-                // Well inside a square the claim stands.
+                // Well inside a square the claim stands, unless a hit is
+                // not finite.
                 let g: Grid = [[[edge + 0.5 * size, 0.55 * size]; 5]; 5];
                 for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
                     assert!(in_one_square(&g, map, size), "{map:?} inside");
+                }
+                for bad in [f64::NAN, f64::INFINITY] {
+                    let mut g = g;
+                    g[2][3][1] = bad;
+                    for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
+                        assert!(!in_one_square(&g, map, size), "{map:?} with {bad}");
+                    }
                 }
             }
         }
