@@ -11,7 +11,9 @@ use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
 use crate::prepare::Prepared;
 use crate::roots::bernstein::BernsteinBasis;
+use crate::roots::inside;
 use crate::scene::{RenderSettings, Scene, Traversal};
+use crate::with_support;
 
 /// How the traversal decides which cells to skip.
 pub enum Skip<'a> {
@@ -42,6 +44,11 @@ pub struct Ctx<'a, T: Coefficient = f64> {
     /// ever clipped by it); else the domain. Empty (`lo > hi`) when nothing is
     /// tagged. Rays that miss it skip the traversal altogether.
     pub active: [DVec3; 2],
+    /// The medium of every ray entering the active box through one of its
+    /// faces, when the box lies strictly inside the domain
+    /// ([`entry_side`]); `None` makes each ray evaluate the field where it
+    /// enters.
+    pub entry_side: Option<bool>,
     pub basis: BernsteinBasis,
     pub skip: Skip<'a>,
     /// Sub-cell masks of the tagged cells (Bézier classification).
@@ -83,11 +90,16 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
             },
             _ => [DVec3::ZERO, box_max],
         };
+        let iso = field.separating_iso(scene.surface.iso);
+        let inside_domain = active[0].cmple(active[1]).all()
+            && active[0].cmpgt(DVec3::ZERO).all()
+            && active[1].cmplt(box_max).all();
         Ctx {
             scene,
             active,
+            entry_side: inside_domain.then(|| entry_side(field, iso, active[0] / spacing)),
             field,
-            iso: field.separating_iso(scene.surface.iso),
+            iso,
             lattice,
             spacing,
             inv_spacing: DVec3::ONE / spacing,
@@ -168,5 +180,117 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
     #[inline(always)]
     pub fn to_grid(&self, p: DVec3) -> DVec3 {
         p * self.inv_spacing
+    }
+}
+
+/// The field's side of `iso` on the whole surface of an active box that lies
+/// strictly inside the domain, from one evaluation at its corner `corner`
+/// (grid coordinates).
+///
+/// The box is the tagged cells' bounding box grown by one cell, so every
+/// point of its surface (and every point a rounding error away) lies in a
+/// closed cell left untagged, where the classification proved `f - iso`
+/// non-zero with a margin above evaluation rounding. The surface is
+/// connected and `f` continuous, so that sign is one constant over it, and
+/// every point evaluation there gives it: primary rays that enter through a
+/// face need no evaluation of their own.
+fn entry_side<T: Coefficient>(field: &Field<T>, iso: f64, corner: DVec3) -> bool {
+    let n = field.dims();
+    let q: [f64; 3] = std::array::from_fn(|a| corner[a].clamp(0.0, (n[a] - 1) as f64));
+    inside(with_support!(field.kernel().support(), S => field.value_in::<S>(q)) - iso)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use super::*;
+    use crate::classify::Method;
+    use crate::phantom::{mix64, uniform};
+    use crate::volume::{SampleType, Volume};
+    use crate::with_field;
+
+    /// `n³` samples: `inner` in a ball of radius `n/4` about the centre,
+    /// `outer` elsewhere.
+    fn ball(n: usize, inner: f32, outer: f32) -> Volume {
+        let c = (n - 1) as f64 / 2.0;
+        let mut s = Vec::with_capacity(n * n * n);
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    let r2 = [x, y, z]
+                        .iter()
+                        .map(|&v| (v as f64 - c).powi(2))
+                        .sum::<f64>();
+                    s.push(if r2 <= (n as f64 / 4.0).powi(2) {
+                        inner
+                    } else {
+                        outer
+                    });
+                }
+            }
+        }
+        Volume::new([n; 3], [1.0; 3], SampleType::F32, s).unwrap()
+    }
+
+    fn scene(traversal: &str) -> Scene {
+        let text = "[image]\nwidth = 8\nheight = 8\n\
+            [camera]\nkind = 'perspective'\nposition = [11.5, 11.5, -60.0]\nlook_at = [11.5, 11.5, 11.5]\nup = [0.0, 1.0, 0.0]\nfov_y = 20.0\n\
+            [volume.phantom]\nkind = 'sphere'\nsize = 24\nradius = 6.0\nsigma = 1.0\n\
+            [surface]\nfilter = 'bspline3'\niso = 100.0\nior = 1.5\n\
+            [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
+        let set = vec![format!("render.traversal={traversal}")];
+        Scene::parse(text, std::path::Path::new("test.toml"), &set).unwrap()
+    }
+
+    /// Rays from every side entering the active box through a face find the
+    /// field on the side [`Ctx::entry_side`] states, for a ball above the
+    /// iso-value in a background below it and the other way round; a box
+    /// reaching the domain's boundary gives no side.
+    #[test]
+    fn entry_side_is_the_field_side_on_every_face() {
+        for (inner, outer, expect) in [(200.0, 0.0, false), (0.0, 200.0, true)] {
+            let sc = scene("octree");
+            let prep = Prepared::new(Arc::new(ball(24, inner, outer)), sc.surface.filter)
+                .with_accel(sc.surface.iso, Method::Bezier(2));
+            with_field!(&prep.field, f => {
+                let ctx = Ctx::new(&sc, &prep, f.as_ref());
+                assert_eq!(ctx.entry_side, Some(expect));
+                let centre = DVec3::splat(11.5);
+                let mut entered = 0;
+                for k in 0..4000u64 {
+                    let u = |j| 2.0 * uniform(mix64(k), j) - 1.0;
+                    let from = centre + 60.0 * DVec3::new(u(0), u(1), u(2)).normalize();
+                    let to = centre + 8.0 * DVec3::new(u(3), u(4), u(5));
+                    let d = (to - from).normalize();
+                    let Some((t0, _)) = ctx.clip(from, d, 0.0) else { continue };
+                    assert!(t0 > 0.0);
+                    let q = ctx.to_grid(from + t0 * d).to_array();
+                    let g = with_support!(4, S => f.value_in::<S>(q)) - ctx.iso;
+                    assert_eq!(inside(g), expect, "ray {k} enters at {q:?}");
+                    entered += 1;
+                }
+                assert!(entered > 3000, "{entered}");
+            });
+        }
+        // Above the iso-value but for two layers at x = 0, 1: tagged cells
+        // reach the domain's boundary.
+        let n = 24;
+        let s = (0..n * n * n)
+            .map(|i| if i % n < 2 { 0.0 } else { 200.0 })
+            .collect();
+        let vol = Volume::new([n; 3], [1.0; 3], SampleType::F32, s).unwrap();
+        let sc = scene("octree");
+        let prep = Prepared::new(Arc::new(vol), sc.surface.filter)
+            .with_accel(sc.surface.iso, Method::Bezier(2));
+        with_field!(&prep.field, f => {
+            assert_eq!(Ctx::new(&sc, &prep, f.as_ref()).entry_side, None);
+        });
+        // Without classification every ray evaluates its own side.
+        let sc = scene("dda");
+        let prep = Prepared::new(Arc::new(ball(n, 200.0, 0.0)), sc.surface.filter);
+        with_field!(&prep.field, f => {
+            assert_eq!(Ctx::new(&sc, &prep, f.as_ref()).entry_side, None);
+        });
     }
 }

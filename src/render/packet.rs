@@ -58,7 +58,9 @@ pub struct Rays<'a> {
     pub inside: BVec<'a, bool>,
     /// False from the entry stage until the first solve needs the medium: it
     /// is the field's side at the entry point (`t_start` of the first
-    /// piece), and a ray that meets no candidate cell never needs it.
+    /// piece), and a ray that meets no candidate cell never needs it. Rays
+    /// entering through a face of an active box with one side all over
+    /// ([`crate::render::Ctx::entry_side`]) know it from the start.
     pub side_known: BVec<'a, bool>,
     pub events: BVec<'a, u32>,
     pub fate: BVec<'a, Fate>,

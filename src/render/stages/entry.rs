@@ -47,6 +47,11 @@ pub fn entry<const S: usize, T: Coefficient>(
                     // `place` sampled the field at this very point (the
                     // march's first sample).
                     rays.inside[i] = inside(rays.seg_g[0][i]);
+                } else if let Some(side) = ctx.entry_side.filter(|_| t0 > 0.0) {
+                    // Entered through a face of the active box, whose whole
+                    // surface is on one side (`Ctx::entry_side`).
+                    rays.inside[i] = side;
+                    rays.side_known[i] = true;
                 } else {
                     // Deferred to the first solve (see `Rays::side_known`).
                     rays.side_known[i] = false;
