@@ -16,7 +16,7 @@ use crate::classify::CurvatureBounds;
 use crate::classify::curvature;
 use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
-use crate::simd::prefetch;
+use crate::simd::{Isa, prefetch};
 
 /// Result of bending a unit direction `d` at a surface with outward normal
 /// `n`, going from index `n1` into `n2`.
@@ -49,6 +49,23 @@ pub fn refract<const S: usize, T: Coefficient>(
     record: &mut Queue,
     c: &mut Counters,
 ) {
+    crate::with_isa!(Isa::current(), _L, _M => refract_runs::<S, T>(ctx, rays, input, traverse, record, c))
+}
+
+/// Crossings per run: one AVX-512 vector of `f64`.
+const RUN: usize = 8;
+
+/// The stage over runs of [`RUN`] crossings: the gradients ray by ray, the
+/// bending in vector lanes ([`bend_lanes`]), then each ray's new piece.
+#[inline(always)]
+fn refract_runs<const S: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
+    rays: &mut Rays,
+    input: &[u32],
+    traverse: &mut Queue,
+    record: &mut Queue,
+    c: &mut Counters,
+) {
     let hi = ctx.field.dims().map(|n| (n - 1) as f64);
     // Restart a hair past the crossing so its root is not found again.
     let eps_vox = (10.0 * ctx.settings.tolerance).max(1e-9);
@@ -61,79 +78,191 @@ pub fn refract<const S: usize, T: Coefficient>(
             .abs()
             .max(ctx.field.max_abs_coeff())
             .max(f64::MIN_POSITIVE);
-    for &r in input {
-        let i = r as usize;
-        // The cell whose solve found the crossing.
-        let crossing_cell = rays.cell_of(i);
-        let d = rays.direction(i);
-        let p = rays.origin(i) + rays.t[i] * d;
-        let pg = ctx.to_grid(p);
-        let q = [
-            pg.x.clamp(0.0, hi[0]),
-            pg.y.clamp(0.0, hi[1]),
-            pg.z.clamp(0.0, hi[2]),
-        ];
-        c.kernel_evals += 1;
-        let (value, grad) = ctx.field.value_grad_fast::<S>(q);
-        let grad_world = DVec3::from_array(grad) * ctx.inv_spacing;
-        let len = grad_world.length();
-        let entering = !rays.inside[i];
-        let (n1, n2) = if entering {
-            (ctx.ior_outside, ctx.ior_inside)
-        } else {
-            (ctx.ior_inside, ctx.ior_outside)
-        };
-        let new_dir = if !(len > 0.0 && len.is_finite()) {
-            c.degenerate_normals += 1;
-            rays.inside[i] = entering;
-            d
-        } else {
-            match snell(d, -grad_world / len, n1, n2) {
-                Bend::Refracted(nd) => {
+    // `n1 / n2` entering and leaving, as `snell` divides them.
+    let eta_entering = ctx.ior_outside / ctx.ior_inside;
+    let eta_leaving = ctx.ior_inside / ctx.ior_outside;
+    for run in input.chunks(RUN) {
+        let mut at = Crossings::default();
+        for (l, &r) in run.iter().enumerate() {
+            let i = r as usize;
+            let d = rays.direction(i);
+            let p = rays.origin(i) + rays.t[i] * d;
+            let pg = ctx.to_grid(p);
+            let q = [
+                pg.x.clamp(0.0, hi[0]),
+                pg.y.clamp(0.0, hi[1]),
+                pg.z.clamp(0.0, hi[2]),
+            ];
+            c.kernel_evals += 1;
+            let (value, grad) = ctx.field.value_grad_fast::<S>(q);
+            for a in 0..3 {
+                at.dir[a][l] = d[a];
+                at.grad[a][l] = grad[a];
+            }
+            at.eta[l] = if rays.inside[i] {
+                eta_leaving
+            } else {
+                eta_entering
+            };
+            at.point[l] = p;
+            at.value[l] = value;
+            at.unclamped[l] = q == pg.to_array();
+        }
+        let bent = bend_lanes(&at, ctx.inv_spacing, eps_vox);
+        for (l, &r) in run.iter().enumerate() {
+            let i = r as usize;
+            // The cell whose solve found the crossing.
+            let crossing_cell = rays.cell_of(i);
+            let entering = !rays.inside[i];
+            match bent.outcome[l] {
+                Outcome::Degenerate => {
+                    c.degenerate_normals += 1;
+                    rays.inside[i] = entering;
+                }
+                Outcome::Refracted => {
                     c.refractions += 1;
                     rays.inside[i] = entering;
-                    nd
                 }
-                Bend::Reflected(nd) => {
-                    c.reflections += 1;
-                    nd
-                }
+                Outcome::Reflected => c.reflections += 1,
             }
-        };
-        rays.events[i] += 1;
-        rays.set_origin(i, p);
-        rays.set_direction(i, new_dir);
-        if rays.events[i] >= ctx.settings.max_events {
-            c.terminated += 1;
-            rays.fate[i] = Fate::Terminated;
-            record.push(r);
-            continue;
-        }
-        let eps = eps_vox / ctx.to_grid(new_dir).length();
-        match ctx.clip(p, new_dir, 0.0) {
-            Some((_, t1)) if t1 > eps => {
-                place::<S, _>(ctx, rays, i, (eps, eps), t1, c);
-                if let Some(bounds) = ctx.curvature
-                    && q == pg.to_array()
-                    && let Some(check) =
-                        ClearCheck::new(bounds, rays, i, crossing_cell, value - ctx.iso, grad)
-                {
-                    checks.push(check);
-                    if checks.is_full() {
-                        clear_cells(ctx, bounds, &mut checks, margin, rays, c);
-                    }
-                }
-                traverse.push(r);
-            }
-            _ => {
-                rays.fate[i] = Fate::Escaped;
+            let p = at.point[l];
+            let new_dir = DVec3::new(bent.dir[0][l], bent.dir[1][l], bent.dir[2][l]);
+            rays.events[i] += 1;
+            rays.set_origin(i, p);
+            rays.set_direction(i, new_dir);
+            if rays.events[i] >= ctx.settings.max_events {
+                c.terminated += 1;
+                rays.fate[i] = Fate::Terminated;
                 record.push(r);
+                continue;
+            }
+            let eps = bent.eps[l];
+            match ctx.clip(p, new_dir, 0.0) {
+                Some((_, t1)) if t1 > eps => {
+                    place::<S, _>(ctx, rays, i, (eps, eps), t1, c);
+                    let grad = [0, 1, 2].map(|a| at.grad[a][l]);
+                    if let Some(bounds) = ctx.curvature
+                        && at.unclamped[l]
+                        && let Some(check) = ClearCheck::new(
+                            bounds,
+                            rays,
+                            i,
+                            crossing_cell,
+                            at.value[l] - ctx.iso,
+                            grad,
+                        )
+                    {
+                        checks.push(check);
+                        if checks.is_full() {
+                            clear_cells(ctx, bounds, &mut checks, margin, rays, c);
+                        }
+                    }
+                    traverse.push(r);
+                }
+                _ => {
+                    rays.fate[i] = Fate::Escaped;
+                    record.push(r);
+                }
             }
         }
     }
     if let Some(bounds) = ctx.curvature {
         clear_cells(ctx, bounds, &mut checks, margin, rays, c);
     }
+}
+
+/// A run's crossings: the incoming directions, the field and its gradient
+/// (grid units) there, and `n1 / n2` for each ray. Lanes past the run's end
+/// stay zero (a degenerate normal, ignored).
+#[derive(Default)]
+struct Crossings {
+    dir: [[f64; RUN]; 3],
+    grad: [[f64; RUN]; 3],
+    eta: [f64; RUN],
+    point: [DVec3; RUN],
+    value: [f64; RUN],
+    /// The crossing lies in the domain (its gradient was not taken at a
+    /// clamped point).
+    unclamped: [bool; RUN],
+}
+
+#[derive(Clone, Copy, Default, PartialEq, Debug)]
+enum Outcome {
+    /// No normal (a vanishing or overflowed gradient): straight on.
+    #[default]
+    Degenerate,
+    Refracted,
+    Reflected,
+}
+
+/// The bent rays of a run: unit directions, what happened, and the restart
+/// offset `eps_vox / |new direction in grid units|`.
+struct Bent {
+    dir: [[f64; RUN]; 3],
+    outcome: [Outcome; RUN],
+    eps: [f64; RUN],
+}
+
+/// [`snell`] at a run of crossings in vector lanes, with the normal
+/// `-∇f/|∇f|` from the world-unit gradient: lane by lane the operations of
+/// `snell` and glam's `normalize` in their order (no fused multiply-adds),
+/// so bitwise the directions bending one ray at a time gives (tested). Its
+/// square roots and divisions ran one ray at a time on the divider's
+/// latency.
+#[inline(always)]
+fn bend_lanes(at: &Crossings, inv_spacing: DVec3, eps_vox: f64) -> Bent {
+    let mut bent = Bent {
+        dir: [[0.0; RUN]; 3],
+        outcome: [Outcome::Degenerate; RUN],
+        eps: [0.0; RUN],
+    };
+    let mut v = [[0.0; RUN]; 3];
+    let mut degenerate = [false; RUN];
+    let mut reflected = [false; RUN];
+    for l in 0..RUN {
+        let d: [f64; 3] = std::array::from_fn(|a| at.dir[a][l]);
+        let g: [f64; 3] = std::array::from_fn(|a| at.grad[a][l] * inv_spacing[a]);
+        let len = ((g[0] * g[0]) + (g[1] * g[1]) + (g[2] * g[2])).sqrt();
+        degenerate[l] = !(len > 0.0 && len.is_finite());
+        let n: [f64; 3] = std::array::from_fn(|a| -g[a] / len);
+        // Orient the normal against the incoming ray.
+        let dn = (d[0] * n[0]) + (d[1] * n[1]) + (d[2] * n[2]);
+        let nf: [f64; 3] = std::array::from_fn(|a| if dn > 0.0 { -n[a] } else { n[a] });
+        let cos_i = (-((d[0] * nf[0]) + (d[1] * nf[1]) + (d[2] * nf[2]))).clamp(0.0, 1.0);
+        let eta = at.eta[l];
+        let k = 1.0 - eta * eta * (1.0 - cos_i * cos_i);
+        reflected[l] = k < 0.0;
+        let (s_d, s_n) = if k < 0.0 {
+            (1.0, 2.0 * cos_i)
+        } else {
+            (eta, eta * cos_i - k.sqrt())
+        };
+        for a in 0..3 {
+            // `d + (2 cos_i) nf` reflected: `1.0 * d` is `d` exactly.
+            v[a][l] = s_d * d[a] + s_n * nf[a];
+        }
+    }
+    for l in 0..RUN {
+        let len = ((v[0][l] * v[0][l]) + (v[1][l] * v[1][l]) + (v[2][l] * v[2][l])).sqrt();
+        let recip = 1.0 / len;
+        for a in 0..3 {
+            bent.dir[a][l] = if degenerate[l] {
+                at.dir[a][l]
+            } else {
+                v[a][l] * recip
+            };
+        }
+        bent.outcome[l] = if degenerate[l] {
+            Outcome::Degenerate
+        } else if reflected[l] {
+            Outcome::Reflected
+        } else {
+            Outcome::Refracted
+        };
+        let gd: [f64; 3] = std::array::from_fn(|a| bent.dir[a][l] * inv_spacing[a]);
+        bent.eps[l] = eps_vox / ((gd[0] * gd[0]) + (gd[1] * gd[1]) + (gd[2] * gd[2])).sqrt();
+    }
+    bent
 }
 
 /// A ray just placed a hair past a crossing, waiting for the proof that the
@@ -398,6 +527,71 @@ mod tests {
         }
         // Normal incidence passes straight.
         assert_eq!(snell(-DVec3::Y, n, 1.0, 1.5), Bend::Refracted(-DVec3::Y));
+    }
+
+    /// [`bend_lanes`] gives bitwise what bending one ray at a time with
+    /// [`snell`] gives (directions, outcomes, restart offsets), for
+    /// refraction both ways, total internal reflection, grazing and head-on
+    /// incidence, and vanishing, overflowing or NaN gradients.
+    #[test]
+    fn lanes_bend_as_snell_bitwise() {
+        use crate::phantom::{mix64, uniform};
+        let inv_spacing = DVec3::new(1.0, 1.0 / 0.7, 1.0 / 1.3);
+        let eps_vox = 1e-7;
+        let odd = [0.0, -0.0, f64::NAN, f64::INFINITY, 1e300, 1e-300];
+        let mut seen = [0; 3];
+        for k in 0..2000u64 {
+            let r = |j| 2.0 * uniform(mix64(k), j) - 1.0;
+            let mut at = Crossings::default();
+            for l in 0..RUN {
+                let j = 8 * l as u64;
+                let d = DVec3::new(r(j), r(j + 1), r(j + 2)).normalize();
+                let mut g = DVec3::new(r(j + 3), r(j + 4), r(j + 5)) * 40.0;
+                match k % 7 {
+                    0 if l == 1 => g = -d * 3.0,                // head-on
+                    1 if l == 2 => g = d.cross(DVec3::Y) * 2.0, // grazing
+                    2 if l == 3 => g[(k % 3) as usize] = odd[(k / 7 % 6) as usize],
+                    3 if l == 4 => g = DVec3::ZERO,
+                    _ => {}
+                }
+                for a in 0..3 {
+                    at.dir[a][l] = d[a];
+                    at.grad[a][l] = g[a];
+                }
+                at.eta[l] = if r(j + 6) > 0.0 { 1.0 / 1.5 } else { 1.5 / 1.0 };
+            }
+            let bent = bend_lanes(&at, inv_spacing, eps_vox);
+            for l in 0..RUN {
+                let d = DVec3::new(at.dir[0][l], at.dir[1][l], at.dir[2][l]);
+                let grad_world =
+                    DVec3::new(at.grad[0][l], at.grad[1][l], at.grad[2][l]) * inv_spacing;
+                let len = grad_world.length();
+                let (n1, n2) = if at.eta[l] < 1.0 {
+                    (1.0, 1.5)
+                } else {
+                    (1.5, 1.0)
+                };
+                let (want, outcome) = if !(len > 0.0 && len.is_finite()) {
+                    (d, Outcome::Degenerate)
+                } else {
+                    match snell(d, -grad_world / len, n1, n2) {
+                        Bend::Refracted(nd) => (nd, Outcome::Refracted),
+                        Bend::Reflected(nd) => (nd, Outcome::Reflected),
+                    }
+                };
+                let got = DVec3::new(bent.dir[0][l], bent.dir[1][l], bent.dir[2][l]);
+                assert_eq!(bent.outcome[l], outcome, "{k}/{l}");
+                assert_eq!(
+                    got.to_array().map(f64::to_bits),
+                    want.to_array().map(f64::to_bits),
+                    "{k}/{l}"
+                );
+                let eps = eps_vox / (want * inv_spacing).length();
+                assert_eq!(bent.eps[l].to_bits(), eps.to_bits(), "{k}/{l}");
+                seen[outcome as usize] += 1;
+            }
+        }
+        assert!(seen.iter().all(|&n| n > 200), "{seen:?}");
     }
 
     #[test]
