@@ -127,8 +127,8 @@ impl Camera {
     /// `(xs[l], y)`, `N` at a time (the origin is `position`); `None` for
     /// an orthographic camera. Lane by lane the operations of
     /// [`Camera::ray`] in its order, so bitwise its directions, written over
-    /// arrays so the divisions and square roots run as vector instructions
-    /// (the generator's share of a sphere frame was its divider).
+    /// arrays so the divisions and square root run as vector instructions
+    /// (one ray at a time, they took most of the generator's time).
     #[inline(always)]
     pub fn directions<const N: usize>(&self, xs: &[f64; N], y: f64) -> Option<[[f64; N]; 3]> {
         let Projection::Perspective { tan_half_fov: t } = self.projection else {

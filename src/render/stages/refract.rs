@@ -206,9 +206,9 @@ struct Bent {
 /// [`snell`] at a run of crossings in vector lanes, with the normal
 /// `-∇f/|∇f|` from the world-unit gradient: lane by lane the operations of
 /// `snell` and glam's `normalize` in their order (no fused multiply-adds),
-/// so bitwise the directions bending one ray at a time gives (tested). Its
-/// square roots and divisions ran one ray at a time on the divider's
-/// latency.
+/// so bitwise the directions bending one ray at a time gives (tested), with
+/// the run's square roots and divisions going through the vector unit
+/// together instead of one ray after another.
 #[inline(always)]
 fn bend_lanes(at: &Crossings, inv_spacing: DVec3, eps_vox: f64) -> Bent {
     let mut bent = Bent {
