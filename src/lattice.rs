@@ -60,8 +60,22 @@ impl Lattice {
     /// Linear index of a cell (x fastest).
     #[inline(always)]
     pub fn index(&self, c: [i64; 3]) -> usize {
-        c[0] as usize + self.cells[0] * (c[1] as usize + self.cells[1] * c[2] as usize)
+        linear_index(self.cells, c)
     }
+}
+
+/// Linear index (x fastest) of cell `c` (in range) of a grid of `cells`.
+#[inline(always)]
+pub fn linear_index(cells: [usize; 3], c: [i64; 3]) -> usize {
+    c[0] as usize + cells[0] * (c[1] as usize + cells[1] * c[2] as usize)
+}
+
+/// The cell at linear index `i` of a grid of `cells`: the inverse of
+/// [`linear_index`].
+#[inline(always)]
+pub fn cell_at(cells: [usize; 3], i: usize) -> [i64; 3] {
+    let [nx, ny, _] = cells;
+    [i % nx, i / nx % ny, i / (nx * ny)].map(|v| v as i64)
 }
 
 /// Per-cell storage in 4³ bricks: the 64 cells of a brick are one cache line
@@ -131,6 +145,20 @@ impl Bricked {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn cell_at_inverts_linear_index() {
+        let cells = [5, 3, 4];
+        for i in 0..60 {
+            let c = cell_at(cells, i);
+            assert!(
+                (0..3).all(|a| (0..cells[a] as i64).contains(&c[a])),
+                "{c:?}"
+            );
+            assert_eq!(linear_index(cells, c), i);
+        }
+        assert_eq!(cell_at(cells, 5 + 5 * 3 * 2), [0, 1, 2]);
+    }
 
     #[test]
     fn bricked_slots_are_a_bijection() {

@@ -14,7 +14,7 @@
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 use crate::filter::kernel::binomial;
-use crate::lattice::Lattice;
+use crate::lattice::{Lattice, cell_at};
 
 use super::masks::LinearMasks;
 use super::{Tags, refine_cells, slack, support_minus_iso, support_minus_iso_into};
@@ -391,7 +391,7 @@ pub fn refine_with_masks<T: Coefficient>(
                 crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
                     for (i, flag) in flags.iter_mut().enumerate() {
                         if coarse.get_index(z * slab + i) {
-                            let cell = [(i % nx) as i64, (i / nx) as i64, z as i64];
+                            let cell = cell_at(lattice.cells, z * slab + i);
                             let mask = sub.cell_mask(field, cell, iso, eps);
                             if mask != 0 {
                                 *flag = 1;
@@ -507,13 +507,8 @@ mod tests {
             let beta = bernstein_weights(&f);
             let mut sub = SubCells::new(&f);
             assert_eq!(masks.len(), tags.count(), "{name}");
-            let [nx, ny, _] = lat.cells;
             for &(i, mask) in &masks {
-                let c = [
-                    (i % nx) as i64,
-                    (i / nx % ny) as i64,
-                    (i / (nx * ny)) as i64,
-                ];
+                let c = crate::lattice::cell_at(lat.cells, i);
                 assert!(tags.get(c), "{name} {c:?}");
                 let b = cell_bernstein(&f, c, iso, &beta);
                 assert_eq!(mask, sub.mask(&b, slack(&f)), "{name} {c:?}");

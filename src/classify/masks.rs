@@ -67,7 +67,7 @@ impl SubCellMasks {
             if i >= nx * ny * nz {
                 return None;
             }
-            let c = [i % nx, i / nx % ny, i / (nx * ny)].map(|v| v as i64);
+            let c = crate::lattice::cell_at(cells, i);
             let slot = index.slot(c)?;
             if std::mem::replace(&mut filled[slot], true) {
                 return None;

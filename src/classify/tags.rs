@@ -65,8 +65,7 @@ impl Tags {
     /// The tag of cell `c` (which must be in range).
     #[inline(always)]
     pub fn get(&self, c: [i64; 3]) -> bool {
-        let i = c[0] as usize + self.cells[0] * (c[1] as usize + self.cells[1] * c[2] as usize);
-        self.get_index(i)
+        self.get_index(crate::lattice::linear_index(self.cells, c))
     }
 
     /// True when every tag here is also set in `other`.
@@ -109,7 +108,6 @@ impl Tags {
     /// cell, or `None` when nothing is tagged. Rays that miss this box can
     /// skip the traversal altogether.
     pub fn bounds(&self) -> Option<[[usize; 3]; 2]> {
-        let [nx, ny, _] = self.cells;
         let mut lo = [usize::MAX; 3];
         let mut hi = [0usize; 3];
         for (w, &word) in self.words.iter().enumerate() {
@@ -117,7 +115,7 @@ impl Tags {
             while bits != 0 {
                 let i = w * 64 + bits.trailing_zeros() as usize;
                 bits &= bits - 1;
-                let c = [i % nx, (i / nx) % ny, i / (nx * ny)];
+                let c = crate::lattice::cell_at(self.cells, i).map(|v| v as usize);
                 for a in 0..3 {
                     lo[a] = lo[a].min(c[a]);
                     hi[a] = hi[a].max(c[a]);
