@@ -508,7 +508,7 @@ mod tests {
             let mut sub = SubCells::new(&f);
             assert_eq!(masks.len(), tags.count(), "{name}");
             for &(i, mask) in &masks {
-                let c = crate::lattice::cell_at(lat.cells, i);
+                let c = cell_at(lat.cells, i);
                 assert!(tags.get(c), "{name} {c:?}");
                 let b = cell_bernstein(&f, c, iso, &beta);
                 assert_eq!(mask, sub.mask(&b, slack(&f)), "{name} {c:?}");
