@@ -93,16 +93,22 @@ impl Proximity {
     /// axis; `None` when `c` is tagged.
     #[inline(always)]
     pub fn empty_reach(&self, octant: usize, c: [i64; 3]) -> Option<(i64, i64)> {
-        let i = self.bricked.index(c);
-        match &self.reach {
-            Reach::Octants(maps) => match maps[octant][i] {
-                0 => None,
-                k => Some((0, k as i64 - 1)),
-            },
-            Reach::Centred(map) => match map[i] {
-                0 => None,
-                d => Some((d as i64 - 1, d as i64 - 1)),
-            },
+        self.map_for(octant).empty_reach(c)
+    }
+
+    /// The map a ray heading into `octant` reads: chosen once per ray, so
+    /// each step of its walk is one load instead of a chain through the
+    /// map's variant and the octant's table.
+    #[inline(always)]
+    pub fn map_for(&self, octant: usize) -> ReachMap<'_> {
+        let (bytes, centred) = match &self.reach {
+            Reach::Octants(maps) => (&maps[octant][..], false),
+            Reach::Centred(map) => (&map[..], true),
+        };
+        ReachMap {
+            bricked: self.bricked,
+            bytes,
+            centred,
         }
     }
 
@@ -114,6 +120,27 @@ impl Proximity {
         match &self.reach {
             Reach::Octants(maps) => maps.iter().map(Vec::len).sum(),
             Reach::Centred(map) => map.len(),
+        }
+    }
+}
+
+/// One ray's view of a [`Proximity`] ([`Proximity::map_for`]).
+#[derive(Clone, Copy, Debug)]
+pub struct ReachMap<'a> {
+    bricked: Bricked,
+    bytes: &'a [u8],
+    /// Centred cubes (else cubes anchored at the cell, reaching ahead).
+    centred: bool,
+}
+
+impl ReachMap<'_> {
+    /// [`Proximity::empty_reach`] for this map's octant.
+    #[inline(always)]
+    pub fn empty_reach(&self, c: [i64; 3]) -> Option<(i64, i64)> {
+        match self.bytes[self.bricked.index(c)] as i64 {
+            0 => None,
+            k if self.centred => Some((k - 1, k - 1)),
+            k => Some((0, k - 1)),
         }
     }
 }

@@ -15,7 +15,7 @@ use crate::classify::bezier::SUB;
 use crate::filter::coeffs::Coefficient;
 use crate::filter::kernel::floor_fast;
 use crate::octree::TAGGED;
-use crate::octree::distance::{Proximity, octant};
+use crate::octree::distance::{Proximity, ReachMap, octant};
 use crate::render::stats::Counters;
 use crate::roots::inside;
 use crate::scene::Traversal;
@@ -64,6 +64,27 @@ fn fmax(a: f64, b: f64) -> f64 {
 #[inline(always)]
 fn fmin(a: f64, b: f64) -> f64 {
     if a < b { a } else { b }
+}
+
+/// `⌊x⌋` clamped into `[lo, hi]`, for integral `0 ≤ lo ≤ hi < 2^63`: the
+/// clamp goes first, in floats, so the floor is a truncating conversion
+/// (no correction for negatives, which the clamp has removed) — fewer
+/// dependent instructions on the walk's chain than flooring first. Equal to
+/// `floor(x).clamp(lo, hi)` for every `x`; NaN gives `lo`.
+#[inline(always)]
+pub fn clamped_floor(x: f64, lo: f64, hi: f64) -> i64 {
+    let v = fmin(fmax(x, lo), hi);
+    #[cfg(target_arch = "x86_64")]
+    {
+        use std::arch::x86_64::{_mm_cvttsd_si64, _mm_set_sd};
+        // SAFETY: SSE2 is part of the x86-64 baseline. (`as` would add the
+        // saturation checks the clamp has made unnecessary.)
+        unsafe { _mm_cvttsd_si64(_mm_set_sd(v)) }
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        v as i64
+    }
 }
 
 /// A ray in cell coordinates: origin, direction and its reciprocal.
@@ -250,11 +271,11 @@ pub fn exit_box(
     let next = std::array::from_fn(|a| {
         let (past, inside) = if du[a] > 0.0 {
             // Inside [cell, hi]: clamped into the box, never backwards.
-            let at = floor_fast(ou[a] + t_new * du[a]);
-            (hi[a] + 1, at.min(hi[a]).max(cell[a]))
+            let at = ou[a] + t_new * du[a];
+            (hi[a] + 1, clamped_floor(at, cell[a] as f64, hi[a] as f64))
         } else if du[a] < 0.0 {
-            let at = floor_fast(ou[a] + t_new * du[a]);
-            (lo[a] - 1, at.max(lo[a]).min(cell[a]))
+            let at = ou[a] + t_new * du[a];
+            (lo[a] - 1, clamped_floor(at, lo[a] as f64, cell[a] as f64))
         } else {
             (cell[a], cell[a])
         };
@@ -422,12 +443,16 @@ fn tagged_segment<T: Coefficient>(
 /// walk 15% (single-thread sphere traverse 122 → 141 ms).
 trait EmptySpace: Copy {
     type Reach: Copy;
+    /// What one ray's lookups read, chosen when its walk starts (a distance
+    /// walk reads its octant's map).
+    type Local: Copy;
     /// The reach of the cell alone (a tagged cell whose sub-cells the ray
     /// misses).
     const CELL: Self::Reach;
-    /// How far the empty space around `cell` (in range) reaches for this
-    /// ray; `None` when `cell` is tagged.
-    fn reach(&self, ray: &CellRay, cell: [i64; 3]) -> Option<Self::Reach>;
+    fn local(&self, ray: &CellRay) -> Self::Local;
+    /// How far the empty space around `cell` (in range) reaches for the ray
+    /// of `local`; `None` when `cell` is tagged.
+    fn reach(&self, local: &Self::Local, cell: [i64; 3]) -> Option<Self::Reach>;
     /// Where the ray leaves the box of `reach` around `cell` (not before
     /// `t`), and the cell it enters there.
     fn exit(&self, ray: &CellRay, cell: [i64; 3], reach: Self::Reach, t: f64) -> (f64, [i64; 3]);
@@ -445,10 +470,14 @@ struct OctreeBlocks<'a> {
 impl EmptySpace for OctreeBlocks<'_> {
     /// The block's level.
     type Reach = u32;
+    type Local = ();
     const CELL: u32 = 0;
 
     #[inline(always)]
-    fn reach(&self, _: &CellRay, cell: [i64; 3]) -> Option<u32> {
+    fn local(&self, _: &CellRay) {}
+
+    #[inline(always)]
+    fn reach(&self, _: &(), cell: [i64; 3]) -> Option<u32> {
         match self.tree.skip_byte(cell) {
             TAGGED => None,
             b if (b as u32) < self.leaf_level => Some(0),
@@ -480,14 +509,20 @@ impl<'a> DistanceCubes<'a> {
     }
 }
 
-impl EmptySpace for DistanceCubes<'_> {
+impl<'a> EmptySpace for DistanceCubes<'a> {
     /// Cells the cube reaches behind and ahead of the cell, on every axis.
     type Reach = (i64, i64);
+    type Local = ReachMap<'a>;
     const CELL: (i64, i64) = (0, 0);
 
     #[inline(always)]
-    fn reach(&self, ray: &CellRay, cell: [i64; 3]) -> Option<(i64, i64)> {
-        self.p.empty_reach(octant(ray.du), cell)
+    fn local(&self, ray: &CellRay) -> ReachMap<'a> {
+        self.p.map_for(octant(ray.du))
+    }
+
+    #[inline(always)]
+    fn reach(&self, map: &ReachMap<'a>, cell: [i64; 3]) -> Option<(i64, i64)> {
+        map.empty_reach(cell)
     }
 
     #[inline(always)]
@@ -515,9 +550,10 @@ impl EmptySpace for DistanceCubes<'_> {
 /// One ray's walk in flight: its piece in cell coordinates, where it is, and
 /// the bounds of the piece.
 #[derive(Clone, Copy)]
-struct Walk {
+struct Walk<L> {
     r: u32,
     ray: CellRay,
+    local: L,
     cell: [i64; 3],
     t: f64,
     t_start: f64,
@@ -534,9 +570,9 @@ enum Step {
     Escaped,
 }
 
-impl Walk {
+impl<L: Copy> Walk<L> {
     #[inline(always)]
-    fn start(rays: &mut Rays, r: u32) -> Walk {
+    fn start<E: EmptySpace<Local = L>>(space: &E, rays: &mut Rays, r: u32) -> Walk<L> {
         let i = r as usize;
         let ray = cell_ray(rays, i);
         let mut cell = rays.cell_of(i);
@@ -548,6 +584,7 @@ impl Walk {
         Walk {
             r,
             ray,
+            local: space.local(&ray),
             cell,
             t,
             t_start: rays.t_start[i],
@@ -559,7 +596,7 @@ impl Walk {
     /// holding it, unless the cell is tagged and its segment meets a tagged
     /// sub-cell.
     #[inline(always)]
-    fn step<E: EmptySpace, T: Coefficient>(
+    fn step<E: EmptySpace<Local = L>, T: Coefficient>(
         &mut self,
         ctx: &Ctx<T>,
         space: &E,
@@ -569,7 +606,7 @@ impl Walk {
             return Step::Escaped;
         }
         c.cells_visited += 1;
-        let reach = match space.reach(&self.ray, self.cell) {
+        let reach = match space.reach(&self.local, self.cell) {
             Some(reach) => reach,
             None => match tagged_segment(ctx, &self.ray, self.cell, self.t_start, self.t_end) {
                 Some((ta, tb)) => return Step::Solve(ta, tb),
@@ -609,8 +646,8 @@ fn walk_interleaved<E: EmptySpace, T: Coefficient>(
     c: &mut Counters,
 ) {
     let mut pending = input.iter();
-    let mut walks: [Option<Walk>; WALKS] =
-        std::array::from_fn(|_| pending.next().map(|&r| Walk::start(rays, r)));
+    let mut walks: [Option<Walk<E::Local>>; WALKS] =
+        std::array::from_fn(|_| pending.next().map(|&r| Walk::start(&space, rays, r)));
     let mut live = walks.iter().filter(|w| w.is_some()).count();
     while live > 0 {
         for slot in walks.iter_mut() {
@@ -629,7 +666,7 @@ fn walk_interleaved<E: EmptySpace, T: Coefficient>(
                     record.push(w.r);
                 }
             }
-            *slot = pending.next().map(|&r| Walk::start(rays, r));
+            *slot = pending.next().map(|&r| Walk::start(&space, rays, r));
             if slot.is_none() {
                 live -= 1;
             }
@@ -679,6 +716,40 @@ fn march<const S: usize, T: Coefficient>(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The clamp-then-truncate floor is the floor clamped afterwards, at
+    /// integers, just off them, outside the range on both sides, and for
+    /// NaN and infinities.
+    #[test]
+    fn clamped_floor_is_the_clamped_floor() {
+        let specials = [
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            -0.0,
+            1e300,
+            -1e300,
+        ];
+        for (lo, hi) in [(0i64, 0i64), (0, 3), (5, 9), (12, 12)] {
+            let mut xs: Vec<f64> = specials.to_vec();
+            for k in -3..15 {
+                let x = k as f64;
+                xs.extend([x, x.next_up(), x.next_down(), x + 0.5, x - 1e-9]);
+            }
+            for x in xs {
+                let want = if x.is_nan() {
+                    lo
+                } else {
+                    (x.floor().clamp(-1e18, 1e18) as i64).clamp(lo, hi)
+                };
+                assert_eq!(
+                    clamped_floor(x, lo as f64, hi as f64),
+                    want,
+                    "{x} in [{lo}, {hi}]"
+                );
+            }
+        }
+    }
 
     /// Cells a segment crosses, by dense sampling (a brute-force reference).
     fn brute(ou: [f64; 3], du: [f64; 3], t1: f64) -> Vec<[i64; 3]> {
@@ -749,9 +820,10 @@ mod tests {
         let mut t = 0.0;
         let mut met = Vec::new();
         let mut visits = 0;
+        let local = space.map(|s| s.local(ray));
         while (0..3).all(|a| (0..n[a]).contains(&cell[a])) {
             visits += 1;
-            (t, cell) = match space.and_then(|s| Some((s, s.reach(ray, cell)?))) {
+            (t, cell) = match space.and_then(|s| Some((s, s.reach(local.as_ref()?, cell)?))) {
                 Some((s, reach)) => s.exit(ray, cell, reach, t),
                 None => {
                     if tagged(cell) {
