@@ -11,7 +11,7 @@ use glam::DVec3;
 use super::super::context::Ctx;
 use super::super::packet::{Fate, Queue, Rays};
 use super::place;
-use super::traverse::{CellRay, cell_ray, cell_span, exit_box, in_range};
+use super::traverse::{CellRay, cell_ray, cell_span, exit_cell, in_range};
 use crate::classify::CurvatureBounds;
 use crate::classify::curvature;
 use crate::filter::coeffs::Coefficient;
@@ -401,7 +401,7 @@ impl Clearing {
         q(self.t0) > margin && q(t1) > margin
     }
 
-    /// Finds the next cell — where [`exit_box`] leaves the last one, as the
+    /// Finds the next cell — where [`exit_cell`] leaves the last one, as the
     /// traversal steps through tagged cells — and prefetches its bound (none
     /// after the last extension).
     #[inline(always)]
@@ -410,7 +410,7 @@ impl Clearing {
         if self.t1 >= self.t_end || self.n > MAX_CLEARED {
             return;
         }
-        let (_, next) = exit_box(&self.ray, self.cell, self.cell, self.cell, self.t1);
+        let (_, next) = exit_cell(&self.ray, self.cell, self.t1);
         if !in_range(ctx, next) {
             return;
         }
