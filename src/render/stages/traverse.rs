@@ -70,9 +70,13 @@ fn fmin(a: f64, b: f64) -> f64 {
 /// clamp goes first, in floats, so the floor is a truncating conversion
 /// (no correction for negatives, which the clamp has removed) — fewer
 /// dependent instructions on the walk's chain than flooring first. Equal to
-/// `floor(x).clamp(lo, hi)` for every `x`; NaN gives `lo`.
+/// `floor(x).clamp(lo, hi)` for every `x`; NaN gives `lo`. Also for a
+/// negative `lo` when `lo == hi` (the clamp leaves an integer); otherwise a
+/// negative value would truncate towards zero, not floor — lattice cells
+/// are never negative.
 #[inline(always)]
 pub fn clamped_floor(x: f64, lo: f64, hi: f64) -> i64 {
+    debug_assert!(lo <= hi && (lo >= 0.0 || lo == hi), "[{lo}, {hi}]");
     let v = fmin(fmax(x, lo), hi);
     #[cfg(target_arch = "x86_64")]
     {
@@ -268,8 +272,10 @@ pub fn exit_cell(ray: &CellRay, cell: [i64; 3], t: f64) -> (f64, [i64; 3]) {
     (fmax(t_exit, t), next)
 }
 
-/// Where the ray leaves the box of cells `lo ..= hi` (which holds `cell`),
-/// not before `t`, and the cell it enters there.
+/// Where the ray leaves the box of cells `lo ..= hi` (which holds `cell`;
+/// a box of several cells lies in the lattice, so none of its indices is
+/// negative — see [`clamped_floor`]), not before `t`, and the cell it
+/// enters there.
 ///
 /// The exit axis moves just past the box exactly; the other axes come from
 /// the exit point, clamped into the box and never moving backwards, so every
@@ -484,6 +490,7 @@ trait EmptySpace: Copy {
     /// The reach of the cell alone (a tagged cell whose sub-cells the ray
     /// misses).
     const CELL: Self::Reach;
+    /// The ray's [`EmptySpace::Local`].
     fn local(&self, ray: &CellRay) -> Self::Local;
     /// How far the empty space around `cell` (in range) reaches for the ray
     /// of `local`; `None` when `cell` is tagged.
