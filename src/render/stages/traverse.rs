@@ -237,18 +237,21 @@ pub fn exit_block(ray: &CellRay, cell: [i64; 3], level: u32, t: f64) -> (f64, [i
     exit_box(ray, cell, lo, lo.map(|l| l + size - 1), t)
 }
 
-/// [`exit_box`] of the single cell `cell`: the exit axis steps past it, the
-/// others stay (where `exit_box` would clamp the exit point into the cell),
-/// so no exit point is floored. The same result as `exit_box(ray, cell,
-/// cell, cell, t)` for every input (tested).
+/// Where the ray's line leaves the box of cells `lo ..= hi`, and through
+/// which axis's face (before [`exit_box`] and [`exit_cell`] keep it from
+/// moving backwards).
+///
+/// The direction's signs are the same for every step of a ray, so the
+/// per-axis branches predict well; the choice of the exit axis, which
+/// changes from step to step, is made by selects.
 #[inline(always)]
-pub fn exit_cell(ray: &CellRay, cell: [i64; 3], t: f64) -> (f64, [i64; 3]) {
+fn box_exit_time(ray: &CellRay, lo: [i64; 3], hi: [i64; 3]) -> (f64, usize) {
     let CellRay { ou, du, inv } = *ray;
     let te: [f64; 3] = std::array::from_fn(|a| {
         if du[a] > 0.0 {
-            ((cell[a] + 1) as f64 - ou[a]) * inv[a]
+            ((hi[a] + 1) as f64 - ou[a]) * inv[a]
         } else if du[a] < 0.0 {
-            (cell[a] as f64 - ou[a]) * inv[a]
+            (lo[a] as f64 - ou[a]) * inv[a]
         } else {
             f64::INFINITY
         }
@@ -258,11 +261,21 @@ pub fn exit_cell(ray: &CellRay, cell: [i64; 3], t: f64) -> (f64, [i64; 3]) {
     } else {
         (te[1], 1)
     };
-    let (t_exit, axis) = if t01 <= te[2] { (t01, a01) } else { (te[2], 2) };
+    if t01 <= te[2] { (t01, a01) } else { (te[2], 2) }
+}
+
+/// [`exit_box`] of the single cell `cell`: the exit axis steps past it, the
+/// others stay (where `exit_box` would clamp the exit point into the cell),
+/// so no exit point is floored. The same result as `exit_box(ray, cell,
+/// cell, cell, t)` for every input (tested).
+#[inline(always)]
+pub fn exit_cell(ray: &CellRay, cell: [i64; 3], t: f64) -> (f64, [i64; 3]) {
+    let (t_exit, axis) = box_exit_time(ray, cell, cell);
+    // Per-axis steps, then a select: the axis changes from step to step.
     let next = std::array::from_fn(|a| {
-        let step = if du[a] > 0.0 {
+        let step = if ray.du[a] > 0.0 {
             1
-        } else if du[a] < 0.0 {
+        } else if ray.du[a] < 0.0 {
             -1
         } else {
             0
@@ -289,25 +302,8 @@ pub fn exit_box(
     hi: [i64; 3],
     t: f64,
 ) -> (f64, [i64; 3]) {
-    let CellRay { ou, du, inv } = *ray;
-    // The direction's signs are the same for every step of a ray, so these
-    // branches predict well; the choice of the exit axis, which changes from
-    // step to step, is made by selects.
-    let te: [f64; 3] = std::array::from_fn(|a| {
-        if du[a] > 0.0 {
-            ((hi[a] + 1) as f64 - ou[a]) * inv[a]
-        } else if du[a] < 0.0 {
-            (lo[a] as f64 - ou[a]) * inv[a]
-        } else {
-            f64::INFINITY
-        }
-    });
-    let (t01, a01) = if te[0] <= te[1] {
-        (te[0], 0)
-    } else {
-        (te[1], 1)
-    };
-    let (t_exit, axis) = if t01 <= te[2] { (t01, a01) } else { (te[2], 2) };
+    let CellRay { ou, du, .. } = *ray;
+    let (t_exit, axis) = box_exit_time(ray, lo, hi);
     let t_new = fmax(t_exit, t);
     let next = std::array::from_fn(|a| {
         let (past, inside) = if du[a] > 0.0 {
