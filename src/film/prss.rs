@@ -226,20 +226,9 @@ fn cols(r: &[[f64; 2]; 5], wx: &[f64; 5]) -> [f64; 2] {
     out
 }
 
-/// The ring-1 neighbours of a pixel, classified (index `[dy + 1][dx + 1]`),
-/// with their surfaces worked out on first use.
+/// The ring-1 neighbours of a pixel, classified (index `[dy + 1][dx + 1]`).
 struct Ring {
     n: [[Neighbour; 3]; 3],
-    surf: [[Option<Surface>; 3]; 3],
-}
-
-/// A neighbour's own surface over the centre pixel: its hit moved by its
-/// Jacobian, and the one colour it shows there if it provably stays in one
-/// checker square ([`checker_flat`]).
-#[derive(Clone, Copy)]
-struct Surface {
-    jac: Jacobian,
-    flat: Option<[f32; 3]>,
 }
 
 impl Ring {
@@ -250,61 +239,144 @@ impl Ring {
                 *c = map.neighbour(x + i as i64 - 1, y + j as i64 - 1, centre);
             }
         }
-        Ring {
-            n,
-            surf: [[None; 3]; 3],
-        }
+        Ring { n }
     }
 
     fn all_same(&self) -> bool {
         self.n.iter().flatten().all(|c| *c == Neighbour::Same)
     }
 
-    /// Colour of neighbour `(ox, oy)`'s own surface at sub-pixel offset
-    /// `(tx, ty)` of the centre pixel: its hit moved by its own Jacobian.
-    #[allow(clippy::too_many_arguments)]
-    fn other_color(
-        &mut self,
+    /// What neighbour `(ox, oy)` (not on the centre's piece) shows over the
+    /// centre pixel: its own surface, its hit moved by its own Jacobian.
+    fn look(
+        &self,
         map: &HitMap,
         x: i64,
         y: i64,
         (ox, oy): (i64, i64),
-        (tx, ty): (f64, f64),
         backdrop: &Backdrop,
         background: [f32; 3],
-    ) -> [f32; 3] {
+    ) -> Look {
         let (i, j) = ((ox + 1) as usize, (oy + 1) as usize);
         match self.n[j][i] {
             Neighbour::Same => unreachable!("handled by the caller"),
-            Neighbour::NoHit => background,
+            Neighbour::NoHit => Look::Fixed(background),
             Neighbour::Other(hit, ev) => {
-                let surf = *self.surf[j][i].get_or_insert_with(|| {
-                    let jac = map.jacobian(x + ox, y + oy, hit, ev);
-                    // The affine map over the pixel's square lies in the
-                    // box of its four corners.
-                    let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
-                    for (a, b) in [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
-                        let h = jac.apply(hit, a - ox as f64, b - oy as f64);
-                        for k in 0..2 {
-                            lo[k] = lo[k].min(h[k]);
-                            hi[k] = hi[k].max(h[k]);
-                        }
+                let jac = map.jacobian(x + ox, y + oy, hit, ev);
+                // The affine map over the pixel's square lies in the box of
+                // its four corners: one colour if that is in one square.
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for (a, b) in [(-0.5, -0.5), (0.5, -0.5), (-0.5, 0.5), (0.5, 0.5)] {
+                    let h = jac.apply(hit, a - ox as f64, b - oy as f64);
+                    for k in 0..2 {
+                        lo[k] = lo[k].min(h[k]);
+                        hi[k] = hi[k].max(h[k]);
                     }
-                    Surface {
+                }
+                match checker_flat(backdrop, lo, hi) {
+                    Some(c) => Look::Fixed(c),
+                    None => Look::Moved {
+                        hit,
                         jac,
-                        flat: checker_flat(backdrop, lo, hi),
-                    }
-                });
-                match surf.flat {
-                    Some(c) => c,
-                    None => {
-                        let h = surf.jac.apply(hit, tx - ox as f64, ty - oy as f64);
-                        backdrop.color(h[0], h[1])
-                    }
+                        at: [ox as f64, oy as f64],
+                    },
                 }
             }
         }
     }
+}
+
+/// What a neighbour off the centre's piece shows over the centre pixel
+/// ([`Ring::look`]), resolved before a loop over sub-points.
+#[derive(Clone, Copy)]
+enum Look {
+    /// One colour everywhere: the background, or a surface that stays in
+    /// one checker square.
+    Fixed([f32; 3]),
+    /// The neighbour's hit (at pixel offset `at`) moved by its Jacobian.
+    Moved {
+        hit: [f64; 2],
+        jac: Jacobian,
+        at: [f64; 2],
+    },
+    /// A moved surface over a checkerboard, tabulated: bit `jy·n + ix` is
+    /// the square parity at sub-point `(ix, jy)` of `n` per axis.
+    Parities {
+        odd: u64,
+        n: usize,
+        colors: [[f32; 3]; 2],
+    },
+}
+
+impl Look {
+    /// The colour at sub-point `(ix, jy)`, offset `(tx, ty)` from the centre
+    /// pixel's centre.
+    #[inline(always)]
+    fn color(
+        &self,
+        (ix, jy): (usize, usize),
+        (tx, ty): (f64, f64),
+        backdrop: &Backdrop,
+    ) -> [f32; 3] {
+        match *self {
+            Look::Fixed(c) => c,
+            Look::Moved { hit, jac, at } => {
+                let h = jac.apply(hit, tx - at[0], ty - at[1]);
+                backdrop.color(h[0], h[1])
+            }
+            Look::Parities { odd, n, colors } => colors[(odd >> (jy * n + ix) & 1) as usize],
+        }
+    }
+
+    /// A moved surface over a checkerboard with at most 8 sub-points per
+    /// axis (offsets `t`), as its table of parities — each the colour
+    /// [`Look::color`] of `Moved` gives, bit for bit (the same points,
+    /// divisions and floors, a row of sub-points per vector; tested) —
+    /// so the sub-point loop reads a bit instead of dividing and flooring.
+    fn tabulated(self, t: &[f64], backdrop: &Backdrop) -> Look {
+        match (self, &backdrop.pattern) {
+            (Look::Moved { hit, jac, at }, Pattern::Checker { size, colors }) if t.len() <= 8 => {
+                let isa = crate::simd::Isa::current();
+                let odd =
+                    crate::with_isa!(isa, L, _M => moved_parities::<L>(hit, &jac, at, t, *size));
+                Look::Parities {
+                    odd,
+                    n: t.len(),
+                    colors: *colors,
+                }
+            }
+            (look, _) => look,
+        }
+    }
+}
+
+/// [`Look::tabulated`]'s table: for each row of sub-points, the points
+/// `Jacobian::apply` gives, over the square size, and their parities by
+/// [`crate::simd::odd_floor_sum_mask`] (the floors of [`Backdrop::color`]).
+#[inline(always)]
+fn moved_parities<const L: usize>(
+    hit: [f64; 2],
+    jac: &Jacobian,
+    at: [f64; 2],
+    t: &[f64],
+    size: f64,
+) -> u64 {
+    let n = t.len();
+    let [jx, jy] = jac.or_zero();
+    let a: [f64; 8] = std::array::from_fn(|m| t.get(m).map_or(0.0, |&tx| tx - at[0]));
+    let mut odd = 0u64;
+    for (row, &ty) in t.iter().enumerate() {
+        let b = ty - at[1];
+        let (mut qx, mut qy) = ([0.0f64; 8], [0.0f64; 8]);
+        for m in 0..8 {
+            qx[m] = (hit[0] + a[m] * jx[0] + b * jy[0]) / size;
+            qy[m] = (hit[1] + a[m] * jx[1] + b * jy[1]) / size;
+        }
+        // SAFETY: L == 8 only under Isa::Avx512 (`with_isa!`).
+        let mask = unsafe { crate::simd::odd_floor_sum_mask::<L>(&qx, &qy) };
+        odd |= (mask as u64 & ((1u64 << n) - 1)) << (row * n);
+    }
+    odd
 }
 
 /// The colour of a checkerboard over the box `lo..=hi` (backdrop units)
@@ -475,6 +547,17 @@ impl Ctx<'_> {
         let mut own_total = 0.0;
         let same_at: [[bool; 3]; 3] = ring.n.map(|row| row.map(|c| c == Neighbour::Same));
         let is_same = |(ox, oy): (i64, i64)| same_at[(oy + 1) as usize][(ox + 1) as usize];
+        // Each neighbour off the piece is looked up once, on first use, and
+        // tabulated for the sub-points (most it covers are many: a side of
+        // the line, or a quadrant's hats).
+        let mut looks: [[Option<Look>; 3]; 3] = [[None; 3]; 3];
+        let mut color_of = |o: (i64, i64), sub: (usize, usize), t: (f64, f64)| {
+            let look = looks[(o.1 + 1) as usize][(o.0 + 1) as usize].get_or_insert_with(|| {
+                ring.look(&self.map, x, y, o, self.backdrop, self.background)
+                    .tabulated(&self.hats.t, self.backdrop)
+            });
+            look.color(sub, t, self.backdrop)
+        };
         for jy in 0..n {
             let (sy, b) = (self.hats.side[jy], self.hats.t[jy].abs());
             let ty = self.hats.t[jy];
@@ -520,15 +603,7 @@ impl Ctx<'_> {
                         });
                         match pick {
                             Some(o) => {
-                                let c = ring.other_color(
-                                    &self.map,
-                                    x,
-                                    y,
-                                    o,
-                                    (tx, ty),
-                                    self.backdrop,
-                                    self.background,
-                                );
+                                let c = color_of(o, (ix, jy), (tx, ty));
                                 for k in 0..3 {
                                     acc[k] += c[k] as f64;
                                 }
@@ -545,15 +620,7 @@ impl Ctx<'_> {
                         if is_same(o) {
                             same += w;
                         } else {
-                            let c = ring.other_color(
-                                &self.map,
-                                x,
-                                y,
-                                o,
-                                (tx, ty),
-                                self.backdrop,
-                                self.background,
-                            );
+                            let c = color_of(o, (ix, jy), (tx, ty));
                             for k in 0..3 {
                                 acc[k] += w * c[k] as f64;
                             }
@@ -1385,6 +1452,69 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A tabulated moved surface shows, at every sub-point, the colour the
+    /// moved hit gives there, for every instruction set: hits and Jacobians
+    /// at several scales, missing derivatives, and NaN, infinite or huge
+    /// values.
+    #[test]
+    fn tabulated_surface_matches_the_moved_hit() {
+        let mut rng = 0x2545_f491_4f6c_dd1du64;
+        let mut next = || {
+            rng ^= rng << 13;
+            rng ^= rng >> 7;
+            rng ^= rng << 17;
+            (rng >> 11) as f64 / (1u64 << 53) as f64
+        };
+        let specials = [f64::NAN, f64::INFINITY, -1e300, 3e18, -9.3e15, 4.5e15 + 1.0];
+        let (mut checked, mut odd) = (0, 0);
+        for n in 1..=8 {
+            let taps = Taps::new(n, PrssMap::Bilinear);
+            for case in 0..300 {
+                let size = [24.0, 8.0, 0.3][case % 3];
+                let scale = [0.1, 3.0, 50.0][case / 3 % 3];
+                let mut hit = [1e3 * (next() - 0.5), 1e3 * (next() - 0.5)];
+                let mut d = || Some([scale * (next() - 0.5), scale * (next() - 0.5)]);
+                let jac = Jacobian {
+                    dx: if case % 5 == 0 { None } else { d() },
+                    dy: if case % 7 == 0 { None } else { d() },
+                };
+                if case % 11 == 0 {
+                    hit[case % 2] = specials[case / 11 % specials.len()];
+                }
+                let at = [(case % 3) as f64 - 1.0, (case / 3 % 3) as f64 - 1.0];
+                let backdrop = checker(size);
+                let moved = Look::Moved { hit, jac, at };
+                let tabulated = moved.tabulated(&taps.t, &backdrop);
+                assert!(matches!(tabulated, Look::Parities { .. }));
+                for isa in crate::simd::Isa::available() {
+                    let bits = crate::with_isa!(isa, L, _M => moved_parities::<L>(hit, &jac, at, &taps.t, size));
+                    for jy in 0..n {
+                        for ix in 0..n {
+                            let t = (taps.t[ix], taps.t[jy]);
+                            let want = moved.color((ix, jy), t, &backdrop);
+                            assert_eq!(tabulated.color((ix, jy), t, &backdrop), want);
+                            let Pattern::Checker { colors, .. } = &backdrop.pattern else {
+                                unreachable!()
+                            };
+                            assert_eq!(
+                                colors[(bits >> (jy * n + ix) & 1) as usize],
+                                want,
+                                "{isa:?} n {n} case {case}"
+                            );
+                            checked += 1;
+                            odd += (want == colors[1]) as usize;
+                        }
+                    }
+                }
+            }
+        }
+        // Both colours occur: the comparison can fail.
+        assert!(
+            odd > checked / 4 && odd < 3 * checked / 4,
+            "{odd} of {checked}"
+        );
     }
 
     fn checker(size: f64) -> Backdrop {
