@@ -27,7 +27,14 @@ pub(crate) struct HitMap<'a> {
     film: &'a Film,
     pub w: i64,
     pub h: i64,
+    /// Per pixel, its piece as one number: the event count where it reaches
+    /// the backdrop, [`NO_HIT`] where not ([`HitMap::keys`]).
+    keys: Vec<f32>,
 }
+
+/// [`HitMap::keys`] of a pixel without a backdrop hit: below every event
+/// count (counts are finite and non-negative).
+pub(crate) const NO_HIT: f32 = f32::NEG_INFINITY;
 
 /// `dM/dx` and `dM/dy` (backdrop units per pixel; `y` grows downwards), where
 /// they can be estimated.
@@ -55,11 +62,29 @@ impl Jacobian {
 
 impl<'a> HitMap<'a> {
     pub fn new(film: &'a Film) -> HitMap<'a> {
+        let keys = (film.u.iter().zip(&film.v).zip(&film.events))
+            .map(|((u, v), &e)| {
+                if u.is_finite() && v.is_finite() {
+                    e
+                } else {
+                    NO_HIT
+                }
+            })
+            .collect();
         HitMap {
             film,
             w: film.width as i64,
             h: film.height as i64,
+            keys,
         }
+    }
+
+    /// Per pixel (row-major), one number for its piece: pixel `i` is on the
+    /// piece of a centre with hit state `centre` exactly when
+    /// `keys()[i] == centre.unwrap_or(NO_HIT)` (what
+    /// [`HitMap::same_piece`] answers).
+    pub fn keys(&self) -> &[f32] {
+        &self.keys
     }
 
     #[inline]
@@ -93,12 +118,7 @@ impl<'a> HitMap<'a> {
     /// without building the neighbour.
     #[inline(always)]
     pub fn same_piece(&self, x: i64, y: i64, centre: Option<f32>) -> bool {
-        let i = (y * self.w + x) as usize;
-        let hit = self.film.u[i].is_finite() && self.film.v[i].is_finite();
-        match centre {
-            Some(ev) => hit && self.film.events[i] == ev,
-            None => !hit,
-        }
+        self.keys[(y * self.w + x) as usize] == centre.unwrap_or(NO_HIT)
     }
 
     /// How pixel `(x, y)` relates to a centre with hit state `centre`.
