@@ -623,7 +623,7 @@ impl Ctx<'_> {
         &self,
         x: i64,
         y: i64,
-        ring: &mut Ring,
+        ring: &Ring,
         line: Option<EdgeLine>,
         mut own: impl FnMut(usize, usize) -> [f32; 3],
     ) -> ([f32; 3], f64) {
@@ -729,7 +729,7 @@ impl Ctx<'_> {
 /// Colour of a pixel without a backdrop hit: the background, blended with
 /// neighbours that have one under `blend`; `None` to re-trace it.
 fn no_hit_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
-    let mut ring = Ring::new(&c.map, x, y, None);
+    let ring = Ring::new(&c.map, x, y, None);
     if ring.all_same() {
         return Some(c.background);
     }
@@ -742,7 +742,7 @@ fn no_hit_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]>
             }
             st.pixels_blended += 1;
             let line = edge_line(&c.map, x, y, None);
-            Some(c.blend(x, y, &mut ring, line, |_, _| c.background).0)
+            Some(c.blend(x, y, &ring, line, |_, _| c.background).0)
         }
         PrssFallback::Mirror | PrssFallback::Nearest => Some(c.background),
     }
@@ -1012,7 +1012,7 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
         return None;
     }
     let r = if s.map == PrssMap::Bicubic { 2 } else { 1 };
-    let mut ring = Ring::new(&c.map, x, y, Some(ev));
+    let ring = Ring::new(&c.map, x, y, Some(ev));
     let g = grid(c, (x, y), (centre, ev), r, &ring, st)?;
     let n = c.taps.t.len();
     if blends(s.fallback) && !ring.all_same() {
@@ -1038,7 +1038,7 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
             }
             Pattern::Image(_) => Own::Rows(c.taps.w.iter().map(|wy| rows(&g, wy)).collect()),
         };
-        let (color, _) = c.blend(x, y, &mut ring, line, |ix, jy| match &own {
+        let (color, _) = c.blend(x, y, &ring, line, |ix, jy| match &own {
             Own::Flat(col) => *col,
             Own::Table(table) => table[jy * n + ix],
             Own::Rows(sub_rows) => {
@@ -1354,7 +1354,7 @@ fn footprint_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 
         st.pixels_curved += 1;
         return None;
     }
-    let mut ring = Ring::new(&c.map, x, y, Some(ev));
+    let ring = Ring::new(&c.map, x, y, Some(ev));
     let jac = c.map.jacobian(x, y, centre, ev);
     match (jac.dx, jac.dy) {
         (Some(_), Some(_)) => st.quadrants_interpolated += 4,
@@ -1373,7 +1373,7 @@ fn footprint_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 
         // The neighbours' surfaces where they are, the own surface's filtered
         // colour over the rest.
         let line = edge_line(&c.map, x, y, Some(ev));
-        let (others, share) = c.blend(x, y, &mut ring, line, |_, _| [0.0; 3]);
+        let (others, share) = c.blend(x, y, &ring, line, |_, _| [0.0; 3]);
         return Some(std::array::from_fn(|k| others[k] + (share as f32) * own[k]));
     }
     Some(own)
