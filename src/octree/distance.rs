@@ -88,14 +88,6 @@ impl Proximity {
         matches!(self.reach, Reach::Octants(_))
     }
 
-    /// The empty box a ray in cell `c` (in range) heading into `octant` may
-    /// jump over, as the cells it reaches behind and ahead of `c` on every
-    /// axis; `None` when `c` is tagged.
-    #[inline(always)]
-    pub fn empty_reach(&self, octant: usize, c: [i64; 3]) -> Option<(i64, i64)> {
-        self.map_for(octant).empty_reach(c)
-    }
-
     /// The map a ray heading into `octant` reads: chosen once per ray, so
     /// each step of its walk is one load instead of a chain through the
     /// map's variant and the octant's table.
@@ -134,7 +126,9 @@ pub struct ReachMap<'a> {
 }
 
 impl ReachMap<'_> {
-    /// [`Proximity::empty_reach`] for this map's octant.
+    /// The empty box a ray in cell `c` (in range) heading into this map's
+    /// octant may jump over, as the cells it reaches behind and ahead of `c`
+    /// on every axis; `None` when `c` is tagged.
     #[inline(always)]
     pub fn empty_reach(&self, c: [i64; 3]) -> Option<(i64, i64)> {
         match self.bytes[self.bricked.index(c)] as i64 {
@@ -372,7 +366,7 @@ mod tests {
                         .min()
                         .unwrap_or(255)
                         .min(255);
-                    let reach = p.empty_reach(o, c.map(|v| v as i64));
+                    let reach = p.map_for(o).empty_reach(c.map(|v| v as i64));
                     assert!(reach.is_none_or(|(back, _)| back == 0), "only ahead");
                     assert_eq!(edge(reach), want, "{cells:?} octant {o} cell {c:?}");
                 });
@@ -388,7 +382,7 @@ mod tests {
         assert!(!p.is_octant());
         each_cell(cells, |c| {
             let want = on.iter().map(|&t| cheb(t, c)).min().unwrap().min(255);
-            let reach = p.empty_reach(3, c.map(|v| v as i64));
+            let reach = p.map_for(3).empty_reach(c.map(|v| v as i64));
             assert!(reach.is_none_or(|(back, ahead)| back == ahead), "centred");
             assert_eq!(edge(reach), want, "cell {c:?}");
         });
@@ -402,7 +396,7 @@ mod tests {
         for o in 0..8 {
             each_cell(cells, |c| {
                 let c = c.map(|v| v as i64);
-                assert!(edge(oct.empty_reach(o, c)) >= edge(cen.empty_reach(o, c)));
+                assert!(edge(oct.map_for(o).empty_reach(c)) >= edge(cen.map_for(o).empty_reach(c)));
             });
         }
     }

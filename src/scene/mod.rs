@@ -219,9 +219,10 @@ pub enum Traversal {
     /// 3-D DDA cell by cell, exact per-cell crossings.
     Dda,
     /// Top-down octree over classified cells, DDA inside occupied leaves.
-    /// The default: the fastest one-shot render (its structures build
-    /// quickly; `distance` walks fewer cells but builds eight maps first),
-    /// with the same hits as `dda` bit for bit.
+    /// The default: the fastest one-shot render of the CT scenes (its
+    /// structures build quickly; `distance` walks fewer cells but builds
+    /// eight maps first, which pays off only on the small sphere — times in
+    /// README), with the same hits as `dda` bit for bit.
     #[default]
     Octree,
     /// Jumps over the largest empty cube anchored at the ray's cell and
