@@ -165,8 +165,12 @@ pub(crate) fn map_weights(map: PrssMap, t: f64) -> [f64; 5] {
     w
 }
 
-/// The sub-points along one axis: offsets, map weights, and the bilinear hat
-/// `(side, a)`: the point lies toward neighbour `side` (±1) at `a = |t|`.
+/// `n` sub-point offsets along one axis, centred in the pixel.
+fn sub_points(n: usize) -> Vec<f64> {
+    (0..n).map(|i| (i as f64 + 0.5) / n as f64 - 0.5).collect()
+}
+
+/// The sub-points along one axis: offsets and map weights.
 struct Taps {
     t: Vec<f64>,
     w: Vec<[f64; 5]>,
@@ -174,9 +178,27 @@ struct Taps {
     /// is weight `i` of sub-point `c·CHUNK + k`; zero past the last), for the
     /// vectorised checkerboard count.
     w_chunks: Vec<[[f64; CHUNK]; 5]>,
+}
+
+/// The sub-points of [`Ctx::blend`] (the map's, [`sub_points`]) and their
+/// bilinear hats: sub-point offset `t` lies toward neighbour `side` (±1) at
+/// `a = |t|`; the hats themselves in [`HatBand`]s.
+struct Hats {
+    t: Vec<f64>,
     side: Vec<i64>,
-    /// The sub-points in bands of whole rows, for [`Ctx::blend`].
     bands: Vec<HatBand>,
+}
+
+impl Hats {
+    fn new(n: usize) -> Hats {
+        let t = sub_points(n);
+        let side: Vec<i64> = t.iter().map(|&t| if t < 0.0 { -1 } else { 1 }).collect();
+        Hats {
+            bands: HatBand::bands(&t, &side),
+            side,
+            t,
+        }
+    }
 }
 
 /// Whole rows of sub-points, at most 64 of them, for [`Ctx::blend`]'s sums:
@@ -231,7 +253,7 @@ const CHUNK: usize = 8;
 
 impl Taps {
     fn new(n: usize, map: PrssMap) -> Taps {
-        let t: Vec<f64> = (0..n).map(|i| (i as f64 + 0.5) / n as f64 - 0.5).collect();
+        let t = sub_points(n);
         let w: Vec<[f64; 5]> = t.iter().map(|&t| map_weights(map, t)).collect();
         let w_chunks = w
             .chunks(CHUNK)
@@ -239,14 +261,7 @@ impl Taps {
                 std::array::from_fn(|i| std::array::from_fn(|k| c.get(k).map_or(0.0, |w| w[i])))
             })
             .collect();
-        let side: Vec<i64> = t.iter().map(|&t| if t < 0.0 { -1 } else { 1 }).collect();
-        Taps {
-            w,
-            w_chunks,
-            bands: HatBand::bands(&t, &side),
-            side,
-            t,
-        }
+        Taps { t, w, w_chunks }
     }
 }
 
@@ -469,7 +484,7 @@ pub(crate) struct Ctx<'a> {
     pub s: &'a PostSettings,
     taps: Taps,
     /// Bilinear hats, for blending (the same points as `taps`).
-    hats: Taps,
+    hats: Hats,
     /// Sparser sub-points for footprints well inside a photo's texel scale:
     /// `coarse[k]` has `k + 1` per axis.
     coarse: Vec<Taps>,
@@ -1659,7 +1674,7 @@ pub fn shade(
         background,
         s,
         taps: Taps::new(n, s.map),
-        hats: Taps::new(n, PrssMap::Bilinear),
+        hats: Hats::new(n),
         coarse: (1..n).map(|k| Taps::new(k, s.map)).collect(),
         unresolved,
     };
@@ -1792,7 +1807,7 @@ mod tests {
         let specials = [f64::NAN, f64::INFINITY, -1e300, 3e18, -9.3e15, 4.5e15 + 1.0];
         let (mut checked, mut odd) = (0, 0);
         for n in 1..=8 {
-            let taps = Taps::new(n, PrssMap::Bilinear);
+            let t = sub_points(n);
             for case in 0..300 {
                 let size = [24.0, 8.0, 0.3][case % 3];
                 let scale = [0.1, 3.0, 50.0][case / 3 % 3];
@@ -1808,15 +1823,15 @@ mod tests {
                 let at = [(case % 3) as f64 - 1.0, (case / 3 % 3) as f64 - 1.0];
                 let backdrop = checker(size);
                 let moved = Look::Moved { hit, jac, at };
-                let tabulated = moved.tabulated(&taps.t, &backdrop);
+                let tabulated = moved.tabulated(&t, &backdrop);
                 assert!(matches!(tabulated, Look::Parities { .. }));
                 for isa in crate::simd::Isa::available() {
-                    let bits = crate::with_isa!(isa, L, _M => moved_parities::<L>(hit, &jac, at, &taps.t, size));
+                    let bits = crate::with_isa!(isa, L, _M => moved_parities::<L>(hit, &jac, at, &t, size));
                     for jy in 0..n {
                         for ix in 0..n {
-                            let t = (taps.t[ix], taps.t[jy]);
-                            let want = moved.color((ix, jy), t, &backdrop);
-                            assert_eq!(tabulated.color((ix, jy), t, &backdrop), want);
+                            let at_sub = (t[ix], t[jy]);
+                            let want = moved.color((ix, jy), at_sub, &backdrop);
+                            assert_eq!(tabulated.color((ix, jy), at_sub, &backdrop), want);
                             let Pattern::Checker { colors, .. } = &backdrop.pattern else {
                                 unreachable!()
                             };
@@ -1990,7 +2005,7 @@ mod tests {
                     background: [0.5, 0.25, 0.125],
                     s: &s,
                     taps: Taps::new(n, PrssMap::Bicubic),
-                    hats: Taps::new(n, PrssMap::Bilinear),
+                    hats: Hats::new(n),
                     coarse: Vec::new(),
                     unresolved: Vec::new(),
                 };
@@ -2278,7 +2293,7 @@ mod tests {
             background: [0.5; 3],
             s: &s,
             taps: Taps::new(8, PrssMap::Bicubic),
-            hats: Taps::new(8, PrssMap::Bilinear),
+            hats: Hats::new(8),
             coarse: (1..8).map(|k| Taps::new(k, PrssMap::Bicubic)).collect(),
             unresolved: Vec::new(),
         };
