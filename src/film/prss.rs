@@ -516,9 +516,10 @@ struct EdgeLine {
 
 /// `Φ⁻¹(p)` for `p ∈ (0, 1)`: Newton's method on [`footprint::phi_cdf`]
 /// (monotone on either side of the root) from Acklam's rational
-/// approximation of the quantile (relative error below 1.2e-9), so one or
-/// two steps reach the 1e-10 tolerance where from 0 it took several, each an
-/// `erfc` and an `exp`.
+/// approximation of the quantile (its author gives a relative error below
+/// 1.15e-9), each step an `erfc` and an `exp`. Over `p` in the fit's range
+/// `[1e-4, 1 − 1e-4]` that takes 2 steps, the last one confirming; from 0
+/// it took 5.2 on average and up to 13.
 fn inverse_phi(p: f64) -> f64 {
     let mut x = quantile_guess(p);
     for _ in 0..60 {
@@ -534,7 +535,9 @@ fn inverse_phi(p: f64) -> f64 {
 }
 
 /// Acklam's approximation of the standard normal quantile, `p ∈ (0, 1)`
-/// (0 outside, or for NaN: Newton's start before).
+/// (0 outside, or for NaN: Newton's start before). The test
+/// `inverse_phi_inverts_the_cdf` checks it within 1e-6 of the converged
+/// quantile.
 fn quantile_guess(p: f64) -> f64 {
     const A: [f64; 6] = [
         -3.969_683_028_665_376e1,
