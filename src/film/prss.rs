@@ -762,7 +762,8 @@ impl Ctx<'_> {
     /// one sum of their weighted colours, a weight total per colour where
     /// the surface shows one or two ([`BandColors`]). Summed a sub-point at
     /// a time, with up to four lookups each, a blended pixel took 1.4 µs
-    /// (teapot, single thread: half the PRSS stage).
+    /// (teapot, single thread: half the PRSS stage, measured by skipping the
+    /// sums).
     fn blend(
         &self,
         x: i64,
