@@ -97,8 +97,9 @@ pub const SUB: usize = 4;
 /// coordinates `[i/4, (i+1)/4] × [j/4, (j+1)/4] × [k/4, (k+1)/4]`.
 ///
 /// A ray segment through a tagged cell that meets no tagged sub-cell holds no
-/// crossing, so the traversal skips it without a solve; otherwise only the
-/// part from the first to the last tagged sub-cell is solved.
+/// crossing, so the traversal skips it without a solve
+/// ([`crate::render::stages::traverse::may_meet_tagged_sub_cell`]); otherwise
+/// the whole segment is solved.
 pub struct SubCells {
     s: usize,
     /// The filter's weights in the Bernstein basis ([`bernstein_weights`]).

@@ -57,8 +57,9 @@ pub struct Counters {
     pub rays_entering: u64,
     /// Cells (or octree nodes) the traversal examined.
     pub cells_visited: u64,
-    /// Tagged cells passed without a solve: the ray meets none of their
-    /// tagged sub-cells ([`crate::classify::bezier::SubCells`]).
+    /// Tagged cells passed without a solve: the box of sub-cells the ray's
+    /// segment spans holds none of their tagged sub-cells
+    /// ([`crate::classify::bezier::SubCells`]).
     pub subcell_skips: u64,
     /// Cells passed without a solve right after a crossing — the rest of the
     /// one the new piece starts in and the tagged cells after it — where the

@@ -13,7 +13,6 @@ use super::field_minus_iso;
 use crate::classify::CellBound;
 use crate::classify::bezier::SUB;
 use crate::filter::coeffs::Coefficient;
-use crate::filter::kernel::floor_fast;
 use crate::octree::TAGGED;
 use crate::octree::distance::{Proximity, ReachMap, octant};
 use crate::render::stats::Counters;
@@ -156,79 +155,44 @@ const AXIS_SPAN: [[[u64; SUB]; SUB]; 3] = {
     t
 };
 
-/// Whether the segment `[t0, t1]` of the ray in `cell` meets a tagged
-/// sub-cell of `mask` (4³ bits); when it meets none, it provably holds no
-/// crossing.
+/// Whether the segment `[t0, t1]` of the ray in `cell` may meet a tagged
+/// sub-cell of `mask` (4³ bits): whether the box of sub-cells spanned by the
+/// segment's bounding box (one lookup per axis, widened by 1e-9 against
+/// rounding) holds one. When it holds none, the segment provably holds no
+/// crossing. A pure function of the ray, the cell and `[t0, t1]`, like
+/// [`cell_span`]; a NaN coordinate spans every sub-cell.
 ///
-/// The sub-cell the segment starts in answers most calls; then a box test
-/// (the sub-cells spanned by the segment's bounding box, one lookup per
-/// axis, widened by 1e-9 against rounding) rejects most of the rest;
-/// survivors walk the sub-cells they cross (Amanatides–Woo at quarter-cell
-/// resolution) until a tagged one turns up. A pure function of
-/// the ray, the cell and `[t0, t1]`, like [`cell_span`].
-#[inline]
-pub fn meets_tagged_sub_cell(ray: &CellRay, cell: [i64; 3], t0: f64, t1: f64, mask: u64) -> bool {
-    if mask == 0 {
-        return false;
-    }
-    if mask == u64::MAX {
-        return true;
-    }
+/// The box holds every sub-cell the segment crosses and a few more, so it
+/// lets through some segments that walking the crossed sub-cells would have
+/// skipped — sphere: the box rejects 195k of the walk's 215k per frame,
+/// teapot 587k of 628k — but it is a few branch-free operations where the
+/// walk (first the start sub-cell, then the box, then Amanatides–Woo at
+/// quarter-cell resolution) took a branch per step that the hardware could
+/// not predict. Single-thread frames: sphere 162 → 155 ms, teapot 488 → 480,
+/// cranium 320 → 313 (the solve stage does the extra segments: sphere
+/// 1.25 → 1.33 solves per ray; output bits unchanged).
+#[inline(always)]
+pub fn may_meet_tagged_sub_cell(
+    ray: &CellRay,
+    cell: [i64; 3],
+    t0: f64,
+    t1: f64,
+    mask: u64,
+) -> bool {
     let n = SUB as f64;
-    let local = |a: usize, t: f64| n * (ray.ou[a] + t * ray.du[a] - cell[a] as f64);
-    let index = |v: f64| (floor_fast(v).clamp(0, SUB as i64 - 1)) as usize;
-    let v0: [f64; 3] = std::array::from_fn(|a| local(a, t0));
-    let mut idx = v0.map(index);
-    // The walk's first sub-cell before the box test: most calls end there
-    // (sphere: 606k of the 631k calls past the box test find a tagged
-    // sub-cell, after 1.9 sub-cells on average). For a finite segment its
-    // index lies in the box's range on every axis, so when its bit is set
-    // the box test would have passed: the same answer, sooner.
-    if mask >> (idx[0] + SUB * (idx[1] + SUB * idx[2])) & 1 == 1 {
-        return true;
-    }
+    let last = n - 1.0;
     let mut bbox = u64::MAX;
     for a in 0..3 {
-        let (v0, v1) = (v0[a], local(a, t1));
-        let (lo, hi) = if v0 <= v1 { (v0, v1) } else { (v1, v0) };
-        bbox &= AXIS_SPAN[a][index(lo - 1e-9)][index(hi + 1e-9)];
+        let local = |t: f64| n * (ray.ou[a] + t * ray.du[a] - cell[a] as f64);
+        let (v0, v1) = (local(t0), local(t1));
+        let (lo, hi) = (fmin(v0, v1), fmax(v0, v1));
+        let span = AXIS_SPAN[a][clamped_floor(lo - 1e-9, 0.0, last) as usize]
+            [clamped_floor(hi + 1e-9, 0.0, last) as usize];
+        // `fmin`/`fmax` pass a NaN on as the other value; spanning all is
+        // the conservative answer.
+        bbox &= if (v0 - v1).is_nan() { u64::MAX } else { span };
     }
-    if mask & bbox == 0 {
-        return false;
-    }
-    let mut t_max = [f64::INFINITY; 3];
-    let mut t_delta = [0.0f64; 3];
-    for a in 0..3 {
-        let k = idx[a];
-        if ray.du[a] > 0.0 {
-            t_max[a] = (cell[a] as f64 + (k + 1) as f64 / n - ray.ou[a]) * ray.inv[a];
-            t_delta[a] = ray.inv[a] / n;
-        } else if ray.du[a] < 0.0 {
-            t_max[a] = (cell[a] as f64 + k as f64 / n - ray.ou[a]) * ray.inv[a];
-            t_delta[a] = -ray.inv[a] / n;
-        }
-    }
-    loop {
-        if mask >> (idx[0] + SUB * (idx[1] + SUB * idx[2])) & 1 == 1 {
-            return true;
-        }
-        let a = if t_max[0] <= t_max[1] {
-            if t_max[0] <= t_max[2] { 0 } else { 2 }
-        } else if t_max[1] <= t_max[2] {
-            1
-        } else {
-            2
-        };
-        if t_max[a] >= t1 {
-            return false;
-        }
-        let next = idx[a] as i64 + if ray.du[a] > 0.0 { 1 } else { -1 };
-        if !(0..SUB as i64).contains(&next) {
-            return false;
-        }
-        idx[a] = next as usize;
-        t_max[a] += t_delta[a];
-    }
+    mask & bbox != 0
 }
 
 /// Where the ray leaves the aligned block of `2^level` cells holding `cell`
@@ -454,7 +418,8 @@ fn walk_bound<T: Coefficient>(
 
 /// The segment of the ray's piece inside tagged `cell` to solve (from the
 /// ray and the cell alone, so it is the same bits however the walk got
-/// here), or `None` when it meets none of the cell's tagged sub-cells.
+/// here), or `None` when it provably meets none of the cell's tagged
+/// sub-cells.
 #[inline(always)]
 fn tagged_segment<T: Coefficient>(
     ctx: &Ctx<T>,
@@ -470,7 +435,7 @@ fn tagged_segment<T: Coefficient>(
         // The mask only decides whether to solve: the solve itself gets the
         // whole segment, so its polynomial (and every root, tangential touch
         // and tolerance decision) is the same bits with or without masks.
-        Some(mask) => meets_tagged_sub_cell(ray, cell, t0, t1, mask).then_some((t0, t1)),
+        Some(mask) => may_meet_tagged_sub_cell(ray, cell, t0, t1, mask).then_some((t0, t1)),
         None => Some((t0, t1)),
     }
 }
@@ -486,8 +451,8 @@ trait EmptySpace: Copy {
     /// What one ray's lookups read, chosen when its walk starts (a distance
     /// walk reads its octant's map).
     type Local: Copy;
-    /// The reach of the cell alone (a tagged cell whose sub-cells the ray
-    /// misses).
+    /// The reach of the cell alone (a tagged cell whose tagged sub-cells the
+    /// ray misses).
     const CELL: Self::Reach;
     /// The ray's [`EmptySpace::Local`].
     fn local(&self, ray: &CellRay) -> Self::Local;
@@ -985,6 +950,64 @@ mod sub_cell_tests {
     use crate::roots::bernstein::{BernsteinBasis, IsolationWork};
     use crate::volume::{SampleType, Volume};
 
+    /// The box test against its definition: a mask holding one sub-cell is
+    /// met when that sub-cell lies in the box of sub-cells the segment's
+    /// end points span, and not met when it lies a sub-cell or more away
+    /// from that box on some axis; with every bit set it is always met, with
+    /// none never, and NaN ends span everything.
+    #[test]
+    fn the_box_test_is_the_box_of_the_segment_ends() {
+        use crate::phantom::{mix64, uniform};
+        let (mut met, mut missed) = (0, 0);
+        for k in 0..20_000u64 {
+            let r = |j: u64| uniform(mix64(k), j);
+            let cell = [0, 1, 2].map(|a| (r(a) * 8.0) as i64 - 2);
+            let p0: [f64; 3] = std::array::from_fn(|a| cell[a] as f64 + r(3 + a as u64));
+            let p1: [f64; 3] = std::array::from_fn(|a| cell[a] as f64 + r(6 + a as u64));
+            let du: [f64; 3] = std::array::from_fn(|a| p1[a] - p0[a]);
+            let t0 = r(9) * 2.0 - 1.0;
+            let ou: [f64; 3] = std::array::from_fn(|a| p0[a] - t0 * du[a]);
+            let ray = CellRay::new(ou, du);
+            let t1 = t0 + 1.0;
+            // Sub-cell index ranges of the end points, per axis.
+            let range: [(f64, f64); 3] = std::array::from_fn(|a| {
+                let (x0, x1) = (p0[a] - cell[a] as f64, p1[a] - cell[a] as f64);
+                (4.0 * x0.min(x1), 4.0 * x0.max(x1))
+            });
+            let bit = (r(10) * 64.0) as usize;
+            let ijk = [bit % 4, bit / 4 % 4, bit / 16];
+            let inside = (0..3).all(|a| {
+                let (lo, hi) = range[a];
+                (ijk[a] as f64) < hi.ceil().max(1.0) && (ijk[a] as f64) >= lo.floor().min(3.0)
+            });
+            let clear = (0..3).any(|a| {
+                let (lo, hi) = range[a];
+                (ijk[a] as f64) >= hi + 1e-6 || (ijk[a] as f64 + 1.0) <= lo - 1e-6
+            });
+            let got = may_meet_tagged_sub_cell(&ray, cell, t0, t1, 1 << bit);
+            if inside {
+                assert!(got, "{cell:?} {p0:?} {p1:?} sub-cell {ijk:?}");
+                met += 1;
+            }
+            if clear {
+                assert!(!got, "{cell:?} {p0:?} {p1:?} sub-cell {ijk:?}");
+                missed += 1;
+            }
+            assert!(may_meet_tagged_sub_cell(&ray, cell, t0, t1, u64::MAX));
+            assert!(!may_meet_tagged_sub_cell(&ray, cell, t0, t1, 0));
+        }
+        assert!(met > 1000 && missed > 1000, "{met} {missed}");
+        // A NaN coordinate spans its axis: x here, while y and z stay in
+        // sub-cell 2; a NaN end spans every axis.
+        let meets = |ou: [f64; 3], du: [f64; 3], t1: f64, bit: u32| {
+            may_meet_tagged_sub_cell(&CellRay::new(ou, du), [0; 3], 0.0, t1, 1 << bit)
+        };
+        let nan = [f64::NAN, 0.5, 0.5];
+        assert!(meets(nan, [1.0, 0.0, 0.0], 0.5, 3 + 4 * (2 + 4 * 2)));
+        assert!(!meets(nan, [1.0, 0.0, 0.0], 0.5, 63));
+        assert!(meets([0.1; 3], [1.0; 3], f64::NAN, 63));
+    }
+
     #[test]
     fn a_segment_with_a_crossing_meets_a_tagged_sub_cell() {
         let dims = [10usize, 9, 11];
@@ -1038,7 +1061,7 @@ mod sub_cell_tests {
                 if let Some(s) = poly.first_crossing(start_in, 1e-12, &mut w) {
                     crossings += 1;
                     assert!(
-                        meets_tagged_sub_cell(&ray, cell, t0, t1, mask),
+                        may_meet_tagged_sub_cell(&ray, cell, t0, t1, mask),
                         "{name} {cell:?}: crossing at s = {s} but no tagged sub-cell met (mask {mask:#x})"
                     );
                 }
