@@ -128,37 +128,41 @@ impl BernsteinBasis {
     }
 }
 
-/// True when lane `l` of Bernstein coefficients `bern` (degree `d`) provably
-/// stays on the `from_inside` side (see [`SegmentPoly::stays`]).
+/// Every lane's control polygon as bits: bit `k` of lane `l` is set when
+/// coefficient `k` (of `0..=d`) is [`inside`]. The tests below read the
+/// lane's side changes from one word instead of a branch per coefficient.
 #[inline(always)]
-pub fn lane_stays<const L: usize>(
-    bern: &[[f64; L]; N],
-    d: usize,
-    l: usize,
-    from_inside: bool,
-) -> bool {
-    if from_inside {
-        bern[..=d].iter().all(|b| inside(b[l]))
-    } else {
-        bern[..=d].iter().all(|b| !inside(b[l]))
+pub fn lane_sides<const L: usize>(bern: &[[f64; L]; N], d: usize) -> [u32; L] {
+    let mut sides = [0u32; L];
+    for (k, row) in bern[..=d].iter().enumerate() {
+        for l in 0..L {
+            sides[l] |= (inside(row[l]) as u32) << k;
+        }
     }
+    sides
 }
 
-/// Lane `l` has exactly one sign variation in its Bernstein coefficients
-/// (so exactly one crossing in `(0, 1)`), starting on the `from_inside` side:
-/// the case [`refine_lanes`] solves.
+/// Bit `k` set: the control polygon of [`lane_sides`] changes side between
+/// coefficients `k` and `k + 1`.
 #[inline(always)]
-pub fn lane_single_crossing<const L: usize>(
-    bern: &[[f64; L]; N],
-    d: usize,
-    l: usize,
-    from_inside: bool,
-) -> bool {
-    let mut variations = 0;
-    for k in 0..d {
-        variations += (inside(bern[k][l]) != inside(bern[k + 1][l])) as u32;
-    }
-    variations == 1 && inside(bern[0][l]) == from_inside
+fn side_changes(sides: u32, d: usize) -> u32 {
+    (sides ^ (sides >> 1)) & ((1u32 << d) - 1)
+}
+
+/// True when a lane with control polygon `sides` ([`lane_sides`], degree
+/// `d`) provably stays on the `from_inside` side (see [`SegmentPoly::stays`]).
+#[inline(always)]
+pub fn lane_stays(sides: u32, d: usize, from_inside: bool) -> bool {
+    let all = (1u32 << (d + 1)) - 1;
+    sides == if from_inside { all } else { 0 }
+}
+
+/// A lane with control polygon `sides` has exactly one sign variation in
+/// its Bernstein coefficients (so exactly one crossing in `(0, 1)`),
+/// starting on the `from_inside` side: the case [`refine_lanes`] solves.
+#[inline(always)]
+pub fn lane_single_crossing(sides: u32, d: usize, from_inside: bool) -> bool {
+    side_changes(sides, d).count_ones() == 1 && (sides & 1 == 1) == from_inside
 }
 
 /// Iterations of [`refine_lanes`] at most; bisection alone would reach
@@ -184,6 +188,7 @@ const REFINE_ITERS: usize = 64;
 pub fn refine_lanes<const L: usize, M: crate::simd::Madd>(
     mono: &[[f64; L]; N],
     bern: &[[f64; L]; N],
+    sides: &[u32; L],
     d: usize,
     active: [bool; L],
 ) -> ([f64; L], [u32; L]) {
@@ -201,14 +206,14 @@ pub fn refine_lanes<const L: usize, M: crate::simd::Madd>(
     let (mut lo, mut hi) = ([0.0f64; L], [1.0f64; L]);
     let mut lo_in = [false; L];
     for l in 0..L {
-        lo_in[l] = inside(bern[0][l]);
-        for k in 0..d {
+        lo_in[l] = sides[l] & 1 == 1;
+        // The polygon's first change of side.
+        let changes = side_changes(sides[l], d);
+        if changes != 0 {
+            let k = changes.trailing_zeros() as usize;
             let (a, b) = (bern[k][l], bern[k + 1][l]);
-            if inside(a) != inside(b) {
-                let f = (a / (a - b)).clamp(0.0, 1.0);
-                x[l] = (k as f64 + f) / d as f64;
-                break;
-            }
+            let f = (a / (a - b)).clamp(0.0, 1.0);
+            x[l] = (k as f64 + f) / d as f64;
         }
     }
     let (mut g, mut dg) = eval(&x);
@@ -421,6 +426,52 @@ fn split_half(b: &[f64; N], d: usize) -> ([f64; N], [f64; N]) {
 mod tests {
     use super::*;
 
+    /// The bit tests against their definitions coefficient by coefficient:
+    /// side variations counted pairwise, staying as every coefficient on
+    /// one side, and the first change of side where the refinement starts;
+    /// for every degree, with zeros, negative zeros and NaNs among the
+    /// coefficients (none of which is inside).
+    #[test]
+    fn side_bits_match_the_coefficient_definitions() {
+        let values = [1.0, -1.0, 0.0, -0.0, f64::NAN, 2.5e-300, -7.0];
+        let mut state = 0x2545_f491_4f6c_dd1du64;
+        for case in 0..20_000 {
+            state ^= state << 13;
+            state ^= state >> 7;
+            state ^= state << 17;
+            let d = 1 + case % MAX_DEGREE;
+            let mut bern = [[0.0f64; 1]; N];
+            for (k, row) in bern.iter_mut().enumerate().take(d + 1) {
+                row[0] = values[(state >> (3 * k % 60)) as usize % values.len()];
+            }
+            let sides = lane_sides(&bern, d)[0];
+            let b: Vec<f64> = bern[..=d].iter().map(|r| r[0]).collect();
+            let variations = b
+                .windows(2)
+                .filter(|w| inside(w[0]) != inside(w[1]))
+                .count();
+            let first = b.windows(2).position(|w| inside(w[0]) != inside(w[1]));
+            for from_inside in [false, true] {
+                assert_eq!(
+                    lane_single_crossing(sides, d, from_inside),
+                    variations == 1 && inside(b[0]) == from_inside,
+                    "{b:?}"
+                );
+                assert_eq!(
+                    lane_stays(sides, d, from_inside),
+                    b.iter().all(|&v| inside(v) == from_inside),
+                    "{b:?}"
+                );
+            }
+            let changes = side_changes(sides, d);
+            assert_eq!(
+                (changes != 0).then(|| changes.trailing_zeros() as usize),
+                first,
+                "{b:?}"
+            );
+        }
+    }
+
     fn poly_from_roots(roots: &[f64], scale: f64, degree: usize) -> Vec<f64> {
         // scale · Π (s - r_i), padded with zero leading coefficients.
         let mut p = vec![scale];
@@ -516,11 +567,13 @@ mod tests {
                 active[l] = true;
             }
             let bern = basis.bernstein_lanes::<8, crate::simd::Plain>(&mono);
+            let sides = lane_sides(&bern, 9);
             for l in 0..lanes.len() {
                 let from_inside = inside(bern[0][l]);
-                assert!(lane_single_crossing(&bern, 9, l, from_inside), "lane {l}");
+                assert!(lane_single_crossing(sides[l], 9, from_inside), "lane {l}");
+                assert!(!lane_stays(sides[l], 9, from_inside), "lane {l}");
             }
-            refine_lanes::<8, crate::simd::Plain>(&mono, &bern, 9, active)
+            refine_lanes::<8, crate::simd::Plain>(&mono, &bern, &sides, 9, active)
         };
         for batch in polys.chunks(8) {
             let lanes: Vec<&Vec<f64>> = batch.iter().map(|(_, p)| p).collect();

@@ -19,7 +19,7 @@ use crate::filter::coeffs::Coefficient;
 use crate::filter::restrict::LaneSegments;
 use crate::render::stats::Counters;
 use crate::roots::bernstein::{
-    Interval, IsolationWork, MAX_DEGREE, lane_single_crossing, lane_stays, refine_lanes,
+    Interval, IsolationWork, MAX_DEGREE, lane_sides, lane_single_crossing, lane_stays, refine_lanes,
 };
 use crate::roots::{brent, inside};
 use crate::scene::Traversal;
@@ -120,6 +120,7 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
         ctx.field
             .restrict_lanes::<S, L, M>(&seg, ctx.iso, &mut mono);
         let bern = ctx.basis.bernstein_lanes::<L, M>(&mono);
+        let sides = lane_sides(&bern, d);
         // Lanes with one certified crossing are refined together.
         let mut single = [false; L];
         for (l, &r) in group.iter().enumerate() {
@@ -128,11 +129,11 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
                 if !rays.side_known[i] {
                     set_side::<S, _>(ctx, rays, i, c);
                 }
-                single[l] = lane_single_crossing(&bern, d, l, rays.inside[i]);
+                single[l] = lane_single_crossing(sides[l], d, rays.inside[i]);
             }
         }
         let (roots, evals) = if single.iter().any(|&s| s) {
-            refine_lanes::<L, M>(&mono, &bern, d, single)
+            refine_lanes::<L, M>(&mono, &bern, &sides, d, single)
         } else {
             ([0.0; L], [0; L])
         };
@@ -147,7 +148,7 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
                 hit = Some(roots[l]);
             } else if len > 1e-13 {
                 let from_inside = rays.inside[i];
-                if lane_stays(&bern, d, l, from_inside) {
+                if lane_stays(sides[l], d, from_inside) {
                     c.isolation_intervals += 1;
                 } else {
                     let poly = ctx.basis.lane(&mono, &bern, l);
