@@ -168,9 +168,10 @@ const AXIS_SPAN: [[[u64; SUB]; SUB]; 3] = {
 /// teapot 587k of 628k — but it is a few branch-free operations where the
 /// walk (first the start sub-cell, then the box, then Amanatides–Woo at
 /// quarter-cell resolution) took a branch per step that the hardware could
-/// not predict. Single-thread frames: sphere 162 → 155 ms, teapot 488 → 480,
-/// cranium 320 → 313 (the solve stage does the extra segments: sphere
-/// 1.25 → 1.33 solves per ray; output bits unchanged).
+/// not predict. Single-thread frames, two runs: sphere 161 / 167 → 150 /
+/// 155 ms, teapot 491 / 493 → 466 / 472, cranium 319 / 329 → 302 / 306 (the
+/// solve stage does the extra segments: sphere 1.25 → 1.33 solves per ray;
+/// output bits unchanged).
 #[inline(always)]
 pub fn may_meet_tagged_sub_cell(
     ray: &CellRay,
