@@ -174,7 +174,10 @@ fn render_field<T: Coefficient>(
         .map(Region::Rect)
         .collect();
     let start = Instant::now();
-    let outs = trace_regions(&ctx, regions, first, progress, traced);
+    // A post stage colours the film from the hit image: the first pass
+    // records hits only.
+    let colours = post_mode(scene).is_none();
+    let outs = trace_regions(&ctx, regions, first, colours, progress, traced);
     if let Some(t) = trace.as_deref_mut() {
         t.complete(
             "tiles",
@@ -253,6 +256,7 @@ fn render_field<T: Coefficient>(
                 &ctx,
                 regions,
                 Sampling::Grid { n, centre: false },
+                true,
                 None,
                 traced,
             );
@@ -295,6 +299,7 @@ fn trace_regions<T: Coefficient>(
     ctx: &Ctx<T>,
     regions: Vec<Region>,
     sampling: Sampling,
+    colours: bool,
     progress: Option<&AtomicUsize>,
     traced: bool,
 ) -> Vec<tile::TileOut> {
@@ -302,7 +307,7 @@ fn trace_regions<T: Coefficient>(
         .into_par_iter()
         .map_init(Bump::new, |bump, region| {
             bump.reset();
-            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S, _>(ctx, region, sampling, bump, traced));
+            let out = with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S, _>(ctx, region, sampling, colours, bump, traced));
             if let Some(p) = progress {
                 p.fetch_add(1, Ordering::Relaxed);
             }

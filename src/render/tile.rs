@@ -175,7 +175,9 @@ impl Recorder {
     }
 }
 
-/// Traces every ray of `region` sampled per `sampling`. Scratch comes from
+/// Traces every ray of `region` sampled per `sampling`, recording the
+/// backdrop's colours only with `colours` (a post stage that colours the
+/// film from the hit image replaces them all). Scratch comes from
 /// `bump`, which the caller resets between tiles; `traced` records when and
 /// where the tile and each stage call ran ([`TileOut::trace`]). Never
 /// inlined: one call per tile costs nothing, and profilers get a stable
@@ -185,6 +187,7 @@ pub fn render_tile<const S: usize, T: Coefficient>(
     ctx: &Ctx<T>,
     region: Region,
     sampling: Sampling,
+    colours: bool,
     bump: &Bump,
     traced: bool,
 ) -> TileOut {
@@ -244,7 +247,7 @@ pub fn render_tile<const S: usize, T: Coefficient>(
     stage!(
         times,
         Stage::Record,
-        record::record(ctx, &rays, &record_q, &mut out, c)
+        record::record(ctx, &rays, &record_q, colours, &mut out, c)
     );
     out.counters = counters;
     out.times = times.times;
