@@ -244,18 +244,17 @@ pub fn render_tile<const S: usize, T: Coefficient>(
         );
         refract_q.clear();
     }
-    if generate::rays_per_pixel(sampling) > 1 {
-        // A pixel's colour sums its rays, which reach this queue in the
-        // order they finished (by round, and by how walks paired up, which
-        // depends on the tile): summed in the order they were generated
-        // instead, the colour is the same bits for any tile size.
-        record_q.sort_unstable();
-    }
-    stage!(
-        times,
-        Stage::Record,
+    stage!(times, Stage::Record, {
+        if generate::rays_per_pixel(sampling) > 1 {
+            // A pixel's colour sums its rays, which reach this queue in the
+            // order they finished (by round, and by how walks paired up,
+            // which depends on the tile): summed in the order they were
+            // generated instead, the colour is the same bits for any tile
+            // size.
+            record_q.sort_unstable();
+        }
         record::record(ctx, &rays, &record_q, colours, &mut out, c)
-    );
+    });
     out.counters = counters;
     out.times = times.times;
     if let (Some(start), Some(spans)) = (tile_start, times.spans) {
