@@ -232,19 +232,22 @@ fn output_is_bitwise_identical_across_threads_and_tiles() {
         &["image.width=96", "image.height=80"],
     );
     let prep = Prepared::for_scene(&scene, &LoadOptions::default()).unwrap();
-    let run = |threads: usize, scene: &Scene| {
-        let pool = rayon::ThreadPoolBuilder::new()
-            .num_threads(threads)
-            .build()
-            .unwrap();
-        pool.install(|| render::render(scene, &prep, None))
-    };
-    let one = bits(&run(1, &scene));
-    assert_eq!(one, bits(&run(2, &scene)), "1 vs 2 threads");
-    assert_eq!(one, bits(&run(3, &scene)), "1 vs 3 threads");
+    let run = |threads: usize, scene: &Scene| bits(&render_on(threads, scene, &prep));
+    let one = run(1, &scene);
+    assert_eq!(one, run(2, &scene), "1 vs 2 threads");
+    assert_eq!(one, run(3, &scene), "1 vs 3 threads");
     let mut tiled = scene.clone();
     tiled.render.tile = 7;
-    assert_eq!(one, bits(&run(2, &tiled)), "tile 16 vs tile 7");
+    assert_eq!(one, run(2, &tiled), "tile 16 vs tile 7");
+}
+
+/// A render on a pool of `threads` workers.
+fn render_on(threads: usize, scene: &Scene, prep: &Prepared) -> Frame {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(threads)
+        .build()
+        .unwrap();
+    pool.install(|| render::render(scene, prep, None))
 }
 
 /// With several rays per pixel (grid and jittered supersampling) the pixel's
@@ -266,19 +269,13 @@ fn supersampled_colours_are_bitwise_identical_across_threads_and_tiles() {
             ],
         );
         let prep = Prepared::for_scene(&scene, &LoadOptions::default()).unwrap();
-        let run = |threads: usize, scene: &Scene| {
-            let pool = rayon::ThreadPoolBuilder::new()
-                .num_threads(threads)
-                .build()
-                .unwrap();
-            pool.install(|| render::render(scene, &prep, None))
-        };
-        let one = bits(&run(1, &scene));
-        assert_eq!(one, bits(&run(2, &scene)), "{sampling}: 1 vs 2 threads");
+        let run = |threads: usize, scene: &Scene| bits(&render_on(threads, scene, &prep));
+        let one = run(1, &scene);
+        assert_eq!(one, run(2, &scene), "{sampling}: 1 vs 2 threads");
         for tile in [7, 5, 32] {
             let mut tiled = scene.clone();
             tiled.render.tile = tile;
-            assert_eq!(one, bits(&run(2, &tiled)), "{sampling}: tile 16 vs {tile}");
+            assert_eq!(one, run(2, &tiled), "{sampling}: tile 16 vs {tile}");
         }
     }
 }
