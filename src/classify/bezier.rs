@@ -428,10 +428,7 @@ mod tests {
         // Every pair of nearby points on opposite sides of the iso-value must
         // lie in sub-cells the mask keeps (the segment between them crosses).
         let dims = [8usize, 7, 9];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 5) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = crate::volume::scrambled_u8(dims, 5);
         for name in ["linear", "catmull-rom", "bspline2", "bspline3", "bspline5"] {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             let lat = Lattice::new(f.kernel(), dims);
@@ -523,10 +520,7 @@ mod tests {
     #[test]
     fn bernstein_corners_are_field_values_and_hull_bounds() {
         let dims = [7usize, 6, 8];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = crate::volume::scrambled_u8(dims, 0);
         for name in ["linear", "catmull-rom", "bspline2", "bspline3", "bspline6"] {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             let lat = Lattice::new(f.kernel(), dims);

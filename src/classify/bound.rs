@@ -134,16 +134,12 @@ mod tests {
     use super::*;
     use crate::filter::FilterKind;
     use crate::lattice::Lattice;
-    use crate::volume::{SampleType, Volume};
     use glam::DVec3;
 
     #[test]
     fn bounds_contain_dense_samples() {
         let dims = [6usize, 5, 7];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = crate::volume::scrambled_u8(dims, 0);
         for name in ["linear", "catmull-rom", "bspline2", "bspline3"] {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             let lat = Lattice::new(f.kernel(), dims);

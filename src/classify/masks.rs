@@ -90,16 +90,12 @@ mod tests {
     use crate::classify::bezier::{bernstein_weights, cell_bernstein};
     use crate::classify::{Method, classify};
     use crate::filter::FilterKind;
-    use crate::volume::{SampleType, Volume};
 
     /// A cubic B-spline field of scrambled samples and an iso-value
     /// through it.
     fn noisy_bspline3() -> (Field<f64>, f64) {
         let dims = [11usize, 9, 10];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 13) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = crate::volume::scrambled_u8(dims, 13);
         let f = Field::new(&vol, FilterKind::BSpline(3));
         let iso = f.separating_iso(120.0);
         (f, iso)

@@ -433,14 +433,11 @@ pub(crate) fn refine_cells(
 mod tests {
     use super::*;
     use crate::filter::FilterKind;
-    use crate::volume::{SampleType, Volume};
+    use crate::volume::Volume;
 
     fn noisy() -> Volume {
         let dims = [9usize, 8, 10];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 13) % 251) as f32)
-            .collect();
-        Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap()
+        crate::volume::scrambled_u8(dims, 13)
     }
 
     #[test]

@@ -548,19 +548,11 @@ mod tests {
         Volume::new(dims, [1.0; 3], SampleType::F32, s).unwrap()
     }
 
-    /// u8 samples without structure (a multiplicative scramble of the index).
-    fn scrambled(dims: [usize; 3]) -> Volume {
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 3) % 251) as f32)
-            .collect();
-        Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap()
-    }
-
     #[test]
     fn f32_storage_prefiltered_in_place_is_within_rounding() {
         // In place, each axis pass rounds to f32; from a full f64 copy, only
         // the end does. Both stay within a few f32 ulps of the f64 field.
-        let vol = scrambled([19, 14, 11]);
+        let vol = crate::volume::scrambled_u8([19, 14, 11], 3);
         for name in ["linear", "bspline3", "bspline7", "smooth-bspline3"] {
             let kind = FilterKind::parse(name, 1.0).unwrap();
             let exact = Field::new(&vol, kind).coeffs().interior();
@@ -585,7 +577,7 @@ mod tests {
     #[test]
     fn batch_evaluation_matches_single_points() {
         let dims = [9usize, 7, 8];
-        let vol = scrambled(dims);
+        let vol = crate::volume::scrambled_u8(dims, 3);
         // 37 points: full lane groups and a short tail, inside and outside.
         let pts: Vec<[f64; 3]> = (0..37)
             .map(|k| {
@@ -639,11 +631,7 @@ mod tests {
 
     #[test]
     fn gradient_matches_finite_differences() {
-        let mut s = Vec::new();
-        for i in 0..(7 * 6 * 8) {
-            s.push(((i * 7919) % 251) as f32);
-        }
-        let vol = Volume::new([7, 6, 8], [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = crate::volume::scrambled_u8([7, 6, 8], 0);
         for name in [
             "linear",
             "catmull-rom",

@@ -233,17 +233,13 @@ mod tests {
     use super::*;
     use crate::filter::FilterKind;
     use crate::roots::bernstein::BernsteinBasis;
-    use crate::volume::{SampleType, Volume};
     use crate::with_support;
     use glam::DVec3;
 
     #[test]
     fn restriction_matches_point_evaluation() {
         let dims = [7usize, 6, 8];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = crate::volume::scrambled_u8(dims, 0);
         for name in [
             "linear",
             "catmull-rom",

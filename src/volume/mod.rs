@@ -484,6 +484,16 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     }
 }
 
+/// A u8 volume of samples without structure, for tests: `(i·7919 + offset)
+/// mod 251` at linear index `i` (a multiplicative scramble of the index).
+#[cfg(test)]
+pub(crate) fn scrambled_u8(dims: [usize; 3], offset: usize) -> Volume {
+    let s: Vec<f32> = (0..dims.iter().product::<usize>())
+        .map(|i| ((i * 7919 + offset) % 251) as f32)
+        .collect();
+    Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

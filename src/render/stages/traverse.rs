@@ -949,7 +949,6 @@ mod sub_cell_tests {
     use crate::filter::{Field, FilterKind};
     use crate::lattice::Lattice;
     use crate::roots::bernstein::{BernsteinBasis, IsolationWork};
-    use crate::volume::{SampleType, Volume};
 
     /// The box test against its definition: a mask holding one sub-cell is
     /// met when that sub-cell lies in the box of sub-cells the segment's
@@ -1012,10 +1011,7 @@ mod sub_cell_tests {
     #[test]
     fn a_segment_with_a_crossing_meets_a_tagged_sub_cell() {
         let dims = [10usize, 9, 11];
-        let s: Vec<f32> = (0..dims.iter().product::<usize>())
-            .map(|i| ((i * 7919 + 5) % 251) as f32)
-            .collect();
-        let vol = Volume::new(dims, [1.0; 3], SampleType::U8, s).unwrap();
+        let vol = crate::volume::scrambled_u8(dims, 5);
         let mut rng = 12345u64;
         let mut next = || {
             rng ^= rng << 13;
