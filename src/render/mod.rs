@@ -176,8 +176,8 @@ fn render_field<T: Coefficient>(
     let start = Instant::now();
     // A post stage colours the film from the hit image: the first pass
     // records hits only.
-    let colours = post_mode(scene).is_none();
-    let outs = trace_regions(&ctx, regions, first, colours, progress, traced);
+    let post = post_mode(scene);
+    let outs = trace_regions(&ctx, regions, first, post.is_none(), progress, traced);
     if let Some(t) = trace.as_deref_mut() {
         t.complete(
             "tiles",
@@ -211,7 +211,7 @@ fn render_field<T: Coefficient>(
         );
     }
 
-    if let Some(mode) = post_mode(scene) {
+    if let Some(mode) = post {
         let post_start = Instant::now();
         let settings = prss::PostSettings::new(mode, rs);
         let post = prss::shade(&film, &scene.backdrop, scene.background, &settings);
