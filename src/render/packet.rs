@@ -26,6 +26,11 @@ pub enum Fate {
 pub struct Rays<'a> {
     /// Image pixel index `y * width + x`.
     pub pixel: BVec<'a, u32>,
+    /// The pixel's position in its region's output ([`TileOut`]'s order),
+    /// known when the ray is generated, so recording needs no division.
+    ///
+    /// [`TileOut`]: super::tile::TileOut
+    pub slot: BVec<'a, u32>,
     /// Weight of this ray's colour in its pixel.
     pub weight: BVec<'a, f32>,
     /// True for the pixel-centre ray, which writes the hit-position image.
@@ -71,6 +76,7 @@ impl<'a> Rays<'a> {
         let f = || BVec::with_capacity_in(n, bump);
         Rays {
             pixel: BVec::with_capacity_in(n, bump),
+            slot: BVec::with_capacity_in(n, bump),
             weight: BVec::with_capacity_in(n, bump),
             centre: BVec::with_capacity_in(n, bump),
             org: [f(), f(), f()],
@@ -104,14 +110,22 @@ impl<'a> Rays<'a> {
         self.pixel.is_empty()
     }
 
-    /// Appends a fresh ray's identity, origin and direction; returns its
-    /// index. The other columns lag behind until [`Rays::complete`]: the
+    /// Appends a fresh ray's identity (its image pixel and that pixel's
+    /// output slot), origin and direction; returns its index. The other columns lag behind until [`Rays::complete`]: the
     /// generator fills them for all its rays at once (a bulk fill per column
     /// where a push per ray and column cost a fifth of the stage).
     #[inline]
-    pub fn push(&mut self, pixel: u32, weight: f32, centre: bool, org: DVec3, dir: DVec3) -> u32 {
+    pub fn push(
+        &mut self,
+        (pixel, slot): (u32, u32),
+        weight: f32,
+        centre: bool,
+        org: DVec3,
+        dir: DVec3,
+    ) -> u32 {
         let i = self.len() as u32;
         self.pixel.push(pixel);
+        self.slot.push(slot);
         self.weight.push(weight);
         self.centre.push(centre);
         for a in 0..3 {

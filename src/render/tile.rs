@@ -138,15 +138,6 @@ impl TileOut {
             trace: None,
         }
     }
-
-    /// Position of image pixel `(px, py)` in this output (`pixel` is its index).
-    #[inline]
-    pub fn local_index(&self, px: u32, py: u32, pixel: u32) -> usize {
-        match &self.region {
-            Region::Rect(t) => ((py - t.y0) * t.width() + (px - t.x0)) as usize,
-            Region::List(l) => l.binary_search(&pixel).expect("pixel of this region"),
-        }
-    }
 }
 
 /// Runs one stage and charges its time (and, when tracing, records the call).

@@ -42,8 +42,11 @@ pub fn generate<T: Coefficient>(
         rays.complete();
         return;
     }
+    // Pixels come in the region's order, which is its output's.
+    let mut slot = 0;
     region.for_each_pixel(width, |px, py| {
-        let pixel = py * width + px;
+        let pixel = (py * width + px, slot);
+        slot += 1;
         let (x, y) = (px as f64, py as f64);
         let mut push = |ox: f64, oy: f64, weight: f32, centre: bool| {
             let (o, d) = cam.ray(x + ox, y + oy);
@@ -71,7 +74,7 @@ pub fn generate<T: Coefficient>(
                 if centre {
                     push(0.5, 0.5, 0.0, true);
                 }
-                let key = mix64(seed ^ mix64(pixel as u64));
+                let key = mix64(seed ^ mix64(pixel.0 as u64));
                 for j in 0..n {
                     for i in 0..n {
                         let k = 2 * (j * n + i) as u64;
@@ -103,8 +106,11 @@ fn centre_rays(cam: &Camera, tile: Tile, width: u32, rays: &mut Rays, out: &mut 
             let d = cam.directions(&xs, y).expect("a perspective camera");
             for l in 0..RUN.min((tile.x1 - x0) as usize) {
                 let dir = DVec3::new(d[0][l], d[1][l], d[2][l]);
-                let pixel = py * width + x0 + l as u32;
-                out.push(rays.push(pixel, 1.0, true, cam.position, dir));
+                let (x, slot) = (
+                    x0 + l as u32,
+                    (py - tile.y0) * tile.width() + x0 + l as u32 - tile.x0,
+                );
+                out.push(rays.push((py * width + x, slot), 1.0, true, cam.position, dir));
             }
         }
     }

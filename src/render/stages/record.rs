@@ -19,7 +19,6 @@ pub fn record<T: Coefficient>(
     out: &mut TileOut,
     c: &mut Counters,
 ) {
-    let width = ctx.scene.width;
     for &r in input {
         let i = r as usize;
         let (o, d) = (rays.origin(i), rays.direction(i));
@@ -42,8 +41,7 @@ pub fn record<T: Coefficient>(
                 None
             }
         };
-        let px = rays.pixel[i];
-        let local = out.local_index(px % width, px / width, px);
+        let local = rays.slot[i] as usize;
         if colours {
             let color = match hit {
                 Some((u, v)) => ctx.scene.backdrop.color(u, v),
