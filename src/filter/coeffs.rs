@@ -117,6 +117,7 @@ impl<T: Coefficient> Coeffs<T> {
             padded,
             data: vec![T::default(); padded[0] * padded[1] * padded[2]],
         };
+        crate::heap::advise_huge_pages(&mut grid.data);
         for z in 0..dims[2] {
             for y in 0..dims[1] {
                 let row = &src[dims[0] * (y + dims[1] * z)..][..dims[0]];
