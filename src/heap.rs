@@ -1,4 +1,5 @@
-//! The process heap across frames.
+//! The process heap: memory kept across frames, and huge pages for the
+//! large grids read at random.
 //!
 //! A frame allocates the same buffers as the last one (tile outputs, the
 //! film, the PRSS images) and frees them at its end. glibc's defaults hand
@@ -89,5 +90,44 @@ mod tests {
     #[cfg(all(target_os = "linux", target_env = "gnu"))]
     fn glibc_takes_the_settings() {
         assert!(super::retain_freed_memory());
+    }
+
+    /// Where the kernel offers transparent huge pages on request, an
+    /// advised buffer gets them (else the advice was lost, e.g. on a wrong
+    /// range), and its contents are what was written.
+    #[test]
+    #[cfg(target_os = "linux")]
+    fn advised_buffers_get_huge_pages() {
+        let mode = std::fs::read_to_string("/sys/kernel/mm/transparent_hugepage/enabled")
+            .unwrap_or_default();
+        // 64 MiB: above any mmap threshold glibc takes, so a fresh mapping.
+        let mut buf = vec![0.0f64; 8 << 20];
+        super::advise_huge_pages(&mut buf);
+        for (i, v) in buf.iter_mut().enumerate() {
+            *v = i as f64;
+        }
+        assert!(buf.iter().enumerate().all(|(i, &v)| v == i as f64));
+        if !(mode.contains("[madvise]") || mode.contains("[always]")) {
+            return;
+        }
+        // The advice splits the mapping: the advised part starts at the
+        // buffer's first huge-page boundary.
+        let at = (buf.as_ptr() as usize).next_multiple_of(super::HUGE_PAGE);
+        let smaps = std::fs::read_to_string("/proc/self/smaps").unwrap();
+        let mut inside = false;
+        let mut huge_kb = None;
+        for line in smaps.lines() {
+            if let Some((range, _)) = line.split_once(' ')
+                && let Some((lo, hi)) = range.split_once('-')
+                && let (Ok(lo), Ok(hi)) =
+                    (usize::from_str_radix(lo, 16), usize::from_str_radix(hi, 16))
+            {
+                inside = (lo..hi).contains(&at);
+            } else if inside && let Some(kb) = line.strip_prefix("AnonHugePages:") {
+                huge_kb = kb.trim().trim_end_matches(" kB").parse::<usize>().ok();
+            }
+        }
+        let huge_kb = huge_kb.expect("the buffer's mapping in /proc/self/smaps");
+        assert!(huge_kb >= 2048, "{huge_kb} kB in huge pages");
     }
 }

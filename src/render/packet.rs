@@ -111,9 +111,10 @@ impl<'a> Rays<'a> {
     }
 
     /// Appends a fresh ray's identity (its image pixel and that pixel's
-    /// output slot), origin and direction; returns its index. The other columns lag behind until [`Rays::complete`]: the
-    /// generator fills them for all its rays at once (a bulk fill per column
-    /// where a push per ray and column cost a fifth of the stage).
+    /// output slot), origin and direction; returns its index. The other
+    /// columns lag behind until [`Rays::complete`]: the generator fills them
+    /// for all its rays at once (a bulk fill per column where a push per ray
+    /// and column cost a fifth of the stage).
     #[inline]
     pub fn push(
         &mut self,

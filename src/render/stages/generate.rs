@@ -43,14 +43,14 @@ pub fn generate<T: Coefficient>(
         return;
     }
     // Pixels come in the region's order, which is its output's.
-    let mut slot = 0;
+    let mut next_slot = 0;
     region.for_each_pixel(width, |px, py| {
-        let pixel = (py * width + px, slot);
-        slot += 1;
+        let (pixel, slot) = (py * width + px, next_slot);
+        next_slot += 1;
         let (x, y) = (px as f64, py as f64);
         let mut push = |ox: f64, oy: f64, weight: f32, centre: bool| {
             let (o, d) = cam.ray(x + ox, y + oy);
-            out.push(rays.push(pixel, weight, centre, o, d));
+            out.push(rays.push((pixel, slot), weight, centre, o, d));
         };
         match sampling {
             Sampling::Centre => push(0.5, 0.5, 1.0, true),
@@ -74,7 +74,7 @@ pub fn generate<T: Coefficient>(
                 if centre {
                     push(0.5, 0.5, 0.0, true);
                 }
-                let key = mix64(seed ^ mix64(pixel.0 as u64));
+                let key = mix64(seed ^ mix64(pixel as u64));
                 for j in 0..n {
                     for i in 0..n {
                         let k = 2 * (j * n + i) as u64;
