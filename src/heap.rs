@@ -60,9 +60,9 @@ const HUGE_PAGE: usize = 2 << 20;
 /// the buffer is first written: pages already faulted in stay small.
 ///
 /// Why: the solve reads each cell's 4³ coefficients from anywhere in a
-/// grid of tens of megabytes (the teapot's is 93 MB of `f64`), and with
-/// 4 KiB pages nearly every neighbourhood costs a page walk; one huge page
-/// covers 512 of them.
+/// grid of tens of megabytes (the teapot's is 93 MB of `f64`), where 4 KiB
+/// pages make nearly every neighbourhood a TLB miss; one huge page covers
+/// 512 small ones (teapot solve stage −6%, prefilter −12%: BENCHMARKS.md).
 pub fn advise_huge_pages<T>(buf: &mut [T]) {
     let bytes = std::mem::size_of_val(buf);
     if bytes < 2 * HUGE_PAGE {
