@@ -93,11 +93,12 @@ impl Film {
     }
 
     /// Copies a tile's results into place (hit positions only where the tile
-    /// traced pixel-centre rays).
+    /// traced pixel-centre rays, colours only where it recorded them).
     ///
     /// Tiles are in image coordinates and must lie inside the film's window.
     pub fn blit(&mut self, t: &TileOut, with_hits: bool) {
         let [ox, oy] = self.origin.map(|o| o as usize);
+        let with_colours = !t.color.is_empty();
         match &t.region {
             Region::Rect(tile) => {
                 let tw = tile.width() as usize;
@@ -110,7 +111,9 @@ impl Film {
                         self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
                         self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
                     }
-                    self.color[dst..dst + tw].copy_from_slice(&t.color[src..src + tw]);
+                    if with_colours {
+                        self.color[dst..dst + tw].copy_from_slice(&t.color[src..src + tw]);
+                    }
                 }
             }
             Region::List(pixels) => {
@@ -123,7 +126,9 @@ impl Film {
                         self.v[p] = t.v[k];
                         self.events[p] = t.events[k];
                     }
-                    self.color[p] = t.color[k];
+                    if with_colours {
+                        self.color[p] = t.color[k];
+                    }
                 }
             }
         }

@@ -116,6 +116,8 @@ pub struct TileOut {
     pub u: Vec<f32>,
     pub v: Vec<f32>,
     pub events: Vec<f32>,
+    /// Empty when the tile records no colours (a post stage colours the
+    /// film from the hits), so none are zeroed here or copied to the film.
     pub color: Vec<[f32; 3]>,
     pub counters: Counters,
     pub times: StageTimes,
@@ -125,14 +127,18 @@ pub struct TileOut {
 }
 
 impl TileOut {
-    fn new(region: Region) -> TileOut {
+    fn new(region: Region, colours: bool) -> TileOut {
         let n = region.pixels();
         TileOut {
             region,
             u: vec![f32::NAN; n],
             v: vec![f32::NAN; n],
             events: vec![0.0; n],
-            color: vec![[0.0; 3]; n],
+            color: if colours {
+                vec![[0.0; 3]; n]
+            } else {
+                Vec::new()
+            },
             counters: Counters::default(),
             times: StageTimes::default(),
             trace: None,
@@ -183,7 +189,7 @@ pub fn render_tile<const S: usize, T: Coefficient>(
     traced: bool,
 ) -> TileOut {
     let tile_start = traced.then(Instant::now);
-    let mut out = TileOut::new(region);
+    let mut out = TileOut::new(region, colours);
     let mut counters = Counters::default();
     let mut times = Recorder {
         times: StageTimes::default(),
