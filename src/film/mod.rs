@@ -98,7 +98,6 @@ impl Film {
     /// Tiles are in image coordinates and must lie inside the film's window.
     pub fn blit(&mut self, t: &TileOut, with_hits: bool) {
         let [ox, oy] = self.origin.map(|o| o as usize);
-        let with_colours = !t.color.is_empty();
         match &t.region {
             Region::Rect(tile) => {
                 let tw = tile.width() as usize;
@@ -111,8 +110,8 @@ impl Film {
                         self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
                         self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
                     }
-                    if with_colours {
-                        self.color[dst..dst + tw].copy_from_slice(&t.color[src..src + tw]);
+                    if let Some(c) = &t.color {
+                        self.color[dst..dst + tw].copy_from_slice(&c[src..src + tw]);
                     }
                 }
             }
@@ -126,8 +125,8 @@ impl Film {
                         self.v[p] = t.v[k];
                         self.events[p] = t.events[k];
                     }
-                    if with_colours {
-                        self.color[p] = t.color[k];
+                    if let Some(c) = &t.color {
+                        self.color[p] = c[k];
                     }
                 }
             }

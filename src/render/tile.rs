@@ -116,9 +116,9 @@ pub struct TileOut {
     pub u: Vec<f32>,
     pub v: Vec<f32>,
     pub events: Vec<f32>,
-    /// Empty when the tile records no colours (a post stage colours the
+    /// `None` when the tile records no colours (a post stage colours the
     /// film from the hits), so none are zeroed here or copied to the film.
-    pub color: Vec<[f32; 3]>,
+    pub color: Option<Vec<[f32; 3]>>,
     pub counters: Counters,
     pub times: StageTimes,
     /// When and on which thread the tile ran, with its stage calls (traced
@@ -134,11 +134,7 @@ impl TileOut {
             u: vec![f32::NAN; n],
             v: vec![f32::NAN; n],
             events: vec![0.0; n],
-            color: if colours {
-                vec![[0.0; 3]; n]
-            } else {
-                Vec::new()
-            },
+            color: colours.then(|| vec![[0.0; 3]; n]),
             counters: Counters::default(),
             times: StageTimes::default(),
             trace: None,
@@ -250,7 +246,7 @@ pub fn render_tile<const S: usize, T: Coefficient>(
             // size.
             record_q.sort_unstable();
         }
-        record::record(ctx, &rays, &record_q, colours, &mut out, c)
+        record::record(ctx, &rays, &record_q, &mut out, c)
     });
     out.counters = counters;
     out.times = times.times;

@@ -106,10 +106,8 @@ fn centre_rays(cam: &Camera, tile: Tile, width: u32, rays: &mut Rays, out: &mut 
             let d = cam.directions(&xs, y).expect("a perspective camera");
             for l in 0..RUN.min((tile.x1 - x0) as usize) {
                 let dir = DVec3::new(d[0][l], d[1][l], d[2][l]);
-                let (x, slot) = (
-                    x0 + l as u32,
-                    (py - tile.y0) * tile.width() + x0 + l as u32 - tile.x0,
-                );
+                let x = x0 + l as u32;
+                let slot = (py - tile.y0) * tile.width() + (x - tile.x0);
                 out.push(rays.push((py * width + x, slot), 1.0, true, cam.position, dir));
             }
         }

@@ -8,14 +8,13 @@ use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
 
 /// Records every ray of `input`: its hit position (pixel-centre rays) and,
-/// with `colours`, its weighted backdrop colour (skipped when a post stage
-/// colours the film from the hit image: single-thread record stage, sphere
-/// 6.0 / 5.9 → 3.3 / 3.2 ms, teapot 6.4 / 6.0 → 3.4 / 3.5 ms).
+/// where `out` holds colours, its weighted backdrop colour (skipped when a
+/// post stage colours the film from the hit image: single-thread record
+/// stage, sphere 6.0 / 5.9 → 3.3 / 3.2 ms, teapot 6.4 / 6.0 → 3.4 / 3.5 ms).
 pub fn record<T: Coefficient>(
     ctx: &Ctx<T>,
     rays: &Rays,
     input: &[u32],
-    colours: bool,
     out: &mut TileOut,
     c: &mut Counters,
 ) {
@@ -42,14 +41,14 @@ pub fn record<T: Coefficient>(
             }
         };
         let local = rays.slot[i] as usize;
-        if colours {
+        if let Some(colours) = &mut out.color {
             let color = match hit {
                 Some((u, v)) => ctx.scene.backdrop.color(u, v),
                 None => ctx.scene.background,
             };
             let w = rays.weight[i];
             for k in 0..3 {
-                out.color[local][k] += w * color[k];
+                colours[local][k] += w * color[k];
             }
         }
         if rays.centre[i] {
