@@ -214,6 +214,84 @@ pub unsafe fn cubic_value_grad(
     )
 }
 
+/// [`cubic_value_grad`] for 8 neighbourhoods at once under AVX-512, bitwise
+/// its result per lane: lane `l`'s neighbourhood starts at `data[base[l]]`
+/// (rows `j·sy + k·sz`) and its fractional position on axis `a` is
+/// `t[a][l]`; `poly[j]` is the kernel's weight polynomial `j` (lowest
+/// coefficient first), evaluated as the scalar weights are. Each of `cubic_value_grad`'s vectors along x
+/// becomes four vectors across the lanes, one per x offset; its fused sums
+/// and the order of its final dot products, `(p0 + p2) + (p1 + p3)`, are
+/// kept.
+///
+/// # Safety
+/// The CPU must have AVX-512F and FMA ([`Isa::Avx512`]), and every row
+/// `base[l] + j·sy + k·sz .. + 4` (`j, k < 4`) must lie in `data`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+#[inline]
+pub unsafe fn cubic_value_grad_x8(
+    data: &[f64],
+    base: &[usize; 8],
+    (sy, sz): (usize, usize),
+    t: &[[f64; 8]; 3],
+    poly: &[[f64; 4]; 4],
+) -> ([f64; 8], [[f64; 8]; 3]) {
+    use std::arch::x86_64::*;
+    // SAFETY: each `[f64; 8]` is 64 readable bytes.
+    let ld = |v: &[f64; 8]| unsafe { _mm512_loadu_pd(v.as_ptr()) };
+    let zero = _mm512_setzero_pd();
+    // Per axis, weight j and its derivative at `t`: `Kernel::weights_and_derivs`'s
+    // Horner steps, a separate multiply and add each.
+    let mut w = [[zero; 4]; 3];
+    let mut d = [[zero; 4]; 3];
+    for a in 0..3 {
+        let ta = ld(&t[a]);
+        for j in 0..4 {
+            let (mut v, mut dv) = (_mm512_set1_pd(poly[j][3]), zero);
+            for m in (0..3).rev() {
+                dv = _mm512_add_pd(_mm512_mul_pd(dv, ta), v);
+                v = _mm512_add_pd(_mm512_mul_pd(v, ta), _mm512_set1_pd(poly[j][m]));
+            }
+            w[a][j] = v;
+            d[a][j] = dv;
+        }
+    }
+    let (mut rv, mut ry, mut rz) = ([zero; 4], [zero; 4], [zero; 4]);
+    for k in 0..4 {
+        let (mut pk, mut qk) = ([zero; 4], [zero; 4]);
+        for j in 0..4 {
+            // SAFETY: rows in bounds (caller); AVX-512 (caller).
+            let c: [__m512d; 4] = unsafe {
+                std::mem::transmute(rows4x8::<f64>(
+                    data.as_ptr().wrapping_add(j * sy + k * sz),
+                    base.as_ptr(),
+                ))
+            };
+            let (wy, dy) = (w[1][j], d[1][j]);
+            for i in 0..4 {
+                pk[i] = _mm512_fmadd_pd(wy, c[i], pk[i]);
+                qk[i] = _mm512_fmadd_pd(dy, c[i], qk[i]);
+            }
+        }
+        let (wz, dz) = (w[2][k], d[2][k]);
+        for i in 0..4 {
+            rv[i] = _mm512_fmadd_pd(wz, pk[i], rv[i]);
+            ry[i] = _mm512_fmadd_pd(wz, qk[i], ry[i]);
+            rz[i] = _mm512_fmadd_pd(dz, pk[i], rz[i]);
+        }
+    }
+    let dot = |r: &[__m512d; 4], x: &[__m512d; 4]| -> [f64; 8] {
+        let p: [__m512d; 4] = std::array::from_fn(|i| _mm512_mul_pd(r[i], x[i]));
+        let s = _mm512_add_pd(_mm512_add_pd(p[0], p[2]), _mm512_add_pd(p[1], p[3]));
+        // SAFETY: `__m512d` and `[f64; 8]` have the same size.
+        unsafe { std::mem::transmute(s) }
+    };
+    (
+        dot(&rv, &w[0]),
+        [dot(&rv, &d[0]), dot(&ry, &w[0]), dot(&rz, &w[0])],
+    )
+}
+
 /// `[data[base[l] + off] for each lane l]`: one hardware gather for 8 lanes
 /// (AVX-512) or 4 (AVX2), scalar loads otherwise.
 ///

@@ -363,6 +363,65 @@ impl<T: Coefficient> Field<T> {
         }
     }
 
+    /// [`Field::value_grad_fast`] at `L` in-domain points `q[a][l]`, bitwise
+    /// its result point by point. For cubic kernels over `f64` coefficients
+    /// under AVX-512 (`L == 8`) the points are located one by one, then
+    /// weighted and contracted in vector lanes together by
+    /// [`crate::simd::cubic_value_grad_x8`]. A point at a
+    /// time, locating it, its weights and the reductions' horizontal sums
+    /// were a chain of scalar work per ray.
+    ///
+    /// Every other filter, storage or vector width takes
+    /// [`Field::value_grad_fast`] lane by lane.
+    ///
+    /// # Safety
+    /// `L` must be bound by [`crate::with_isa!`] for the running instruction
+    /// set (8 lanes only under AVX-512).
+    #[inline(always)]
+    pub unsafe fn value_grad_fast_lanes<const S: usize, const L: usize>(
+        &self,
+        q: &[[f64; L]; 3],
+    ) -> ([f64; L], [[f64; L]; 3]) {
+        #[cfg(target_arch = "x86_64")]
+        if let (Some(data), true) = (T::as_f64_slice(self.coeffs.data()), S == 4 && L == 8) {
+            let mut t = [[0.0f64; 8]; 3];
+            let mut cell = [[0isize; 8]; 3];
+            for a in 0..3 {
+                for l in 0..8 {
+                    // In bounds: this branch runs only with `L == 8`.
+                    (cell[a][l], t[a][l]) = self.kernel.locate(q[a][l]);
+                }
+            }
+            let poly: [[f64; 4]; 4] =
+                std::array::from_fn(|j| std::array::from_fn(|m| self.kernel.weight_poly(j)[m]));
+            let (sy, sz) = (self.coeffs.stride(1), self.coeffs.stride(2));
+            let span = 3 * (sy + sz) + 4;
+            let base: [usize; 8] = std::array::from_fn(|l| {
+                let b = self.coeffs.offset(cell[0][l], cell[1][l], cell[2][l]);
+                assert!(b + span <= data.len(), "neighbourhood inside the grid");
+                b
+            });
+            // SAFETY: every row lies in `base + span <= data.len()`
+            // (asserted); L == 8 only under AVX-512 (caller).
+            let (v, g) =
+                unsafe { crate::simd::cubic_value_grad_x8(data, &base, (sy, sz), &t, &poly) };
+            return (
+                std::array::from_fn(|l| v[l]),
+                std::array::from_fn(|a| std::array::from_fn(|l| g[a][l])),
+            );
+        }
+        let mut val = [0.0; L];
+        let mut grad = [[0.0; L]; 3];
+        for l in 0..L {
+            let (v, g) = self.value_grad_fast::<S>([q[0][l], q[1][l], q[2][l]]);
+            val[l] = v;
+            for a in 0..3 {
+                grad[a][l] = g[a];
+            }
+        }
+        (val, grad)
+    }
+
     /// Value and gradient at `L` in-domain points at once (lane layout).
     #[inline(always)]
     fn value_grad_lanes<const S: usize, const L: usize, M: crate::simd::Madd>(
@@ -607,6 +666,69 @@ mod tests {
                 );
             }
         }
+    }
+
+    /// The refraction stage's lane gradients are the one-point ones bit for
+    /// bit, whatever the filter, storage and vector width (every width the
+    /// CPU runs; under AVX-512 cubic filters over `f64` take the lane
+    /// kernel), at points all over the domain, its faces and corners
+    /// included.
+    #[test]
+    fn lane_gradients_are_the_single_point_ones_bitwise() {
+        let dims = [11usize, 9, 10];
+        let vol = crate::volume::scrambled_u8(dims, 7);
+        let hi = dims.map(|n| (n - 1) as f64);
+        let points: Vec<[f64; 3]> = (0..203u64)
+            .map(|k| {
+                let r = |j: u64| crate::phantom::uniform(crate::phantom::mix64(k), j);
+                std::array::from_fn(|a| match (k + a as u64) % 7 {
+                    0 => 0.0,
+                    1 => hi[a],
+                    _ => r(a as u64) * hi[a],
+                })
+            })
+            .collect();
+        for name in ["linear", "catmull-rom", "bspline2", "bspline3", "bspline5"] {
+            let kind = FilterKind::parse(name, 0.0).unwrap();
+            let f64_field = Field::new(&vol, kind);
+            let f32_field = Field::<f32>::new_in(&vol, kind);
+            let bits = |(v, g): (f64, [f64; 3])| (v.to_bits(), g.map(f64::to_bits));
+            for isa in crate::simd::Isa::available() {
+                crate::with_support!(f64_field.kernel().support(), S => {
+                    let lanes = (
+                        lanes_of::<S, _>(isa, &f64_field, &points),
+                        lanes_of::<S, _>(isa, &f32_field, &points),
+                    );
+                    for (k, p) in points.iter().enumerate() {
+                        let want = (f64_field.value_grad_fast::<S>(*p), f32_field.value_grad_fast::<S>(*p));
+                        assert_eq!(bits(lanes.0[k]), bits(want.0), "{name} f64 {isa:?} at {p:?}");
+                        assert_eq!(bits(lanes.1[k]), bits(want.1), "{name} f32 {isa:?} at {p:?}");
+                    }
+                });
+            }
+        }
+    }
+
+    /// [`Field::value_grad_fast_lanes`] over the points, at the width of
+    /// `isa` (short groups padded with their first point).
+    fn lanes_of<const S: usize, T: Coefficient>(
+        isa: crate::simd::Isa,
+        f: &Field<T>,
+        pts: &[[f64; 3]],
+    ) -> Vec<(f64, [f64; 3])> {
+        let mut out = Vec::new();
+        crate::with_isa!(isa, L, _M => {
+            for group in pts.chunks(L) {
+                let q: [[f64; L]; 3] =
+                    std::array::from_fn(|a| std::array::from_fn(|l| group[l.min(group.len() - 1)][a]));
+                // SAFETY: L is bound by `with_isa!`.
+                let (v, g) = unsafe { f.value_grad_fast_lanes::<S, L>(&q) };
+                for l in 0..group.len() {
+                    out.push((v[l], [g[0][l], g[1][l], g[2][l]]));
+                }
+            }
+        });
+        out
     }
 
     #[test]

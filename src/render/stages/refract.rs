@@ -49,16 +49,19 @@ pub fn refract<const S: usize, T: Coefficient>(
     record: &mut Queue,
     c: &mut Counters,
 ) {
-    crate::with_isa!(Isa::current(), _L, _M => refract_runs::<S, T>(ctx, rays, input, traverse, record, c))
+    crate::with_isa!(Isa::current(), L, _M => refract_runs::<S, L, T>(ctx, rays, input, traverse, record, c))
 }
 
 /// Crossings per run: one AVX-512 vector of `f64`.
 const RUN: usize = 8;
 
-/// The stage over runs of [`RUN`] crossings: the gradients ray by ray, the
-/// bending in vector lanes ([`bend_lanes`]), then each ray's new piece.
+/// The stage over runs of [`RUN`] crossings: the gradients in vector lanes
+/// of `L` ([`Field::value_grad_fast_lanes`]), the bending in lanes of the
+/// run ([`bend_lanes`]), then each ray's new piece.
+///
+/// [`Field::value_grad_fast_lanes`]: crate::filter::Field::value_grad_fast_lanes
 #[inline(always)]
-fn refract_runs<const S: usize, T: Coefficient>(
+fn refract_runs<const S: usize, const L: usize, T: Coefficient>(
     ctx: &Ctx<T>,
     rays: &mut Rays,
     input: &[u32],
@@ -83,21 +86,22 @@ fn refract_runs<const S: usize, T: Coefficient>(
     let eta_leaving = ctx.ior_inside / ctx.ior_outside;
     for run in input.chunks(RUN) {
         let mut at = Crossings::default();
+        // Lanes past the run's end evaluate at the grid's origin; their
+        // results are not read.
+        let mut q = [[0.0; RUN]; 3];
         for (l, &r) in run.iter().enumerate() {
             let i = r as usize;
             let d = rays.direction(i);
             let p = rays.origin(i) + rays.t[i] * d;
             let pg = ctx.to_grid(p);
-            let q = [
+            let ql = [
                 pg.x.clamp(0.0, hi[0]),
                 pg.y.clamp(0.0, hi[1]),
                 pg.z.clamp(0.0, hi[2]),
             ];
-            c.kernel_evals += 1;
-            let (value, grad) = ctx.field.value_grad_fast::<S>(q);
             for a in 0..3 {
                 at.dir[a][l] = d[a];
-                at.grad[a][l] = grad[a];
+                q[a][l] = ql[a];
             }
             at.eta[l] = if rays.inside[i] {
                 eta_leaving
@@ -105,8 +109,22 @@ fn refract_runs<const S: usize, T: Coefficient>(
                 eta_entering
             };
             at.point[l] = p;
-            at.value[l] = value;
-            at.unclamped[l] = q == pg.to_array();
+            at.unclamped[l] = ql == pg.to_array();
+        }
+        c.kernel_evals += run.len() as u64;
+        for h in (0..RUN).step_by(L) {
+            if h >= run.len() {
+                break;
+            }
+            let qh: [[f64; L]; 3] = std::array::from_fn(|a| std::array::from_fn(|l| q[a][h + l]));
+            // SAFETY: L is bound by `with_isa!` in `refract`.
+            let (value, grad) = unsafe { ctx.field.value_grad_fast_lanes::<S, L>(&qh) };
+            for l in 0..L {
+                at.value[h + l] = value[l];
+                for a in 0..3 {
+                    at.grad[a][h + l] = grad[a][l];
+                }
+            }
         }
         let bent = bend_lanes(&at, ctx.inv_spacing, eps_vox);
         for (l, &r) in run.iter().enumerate() {
