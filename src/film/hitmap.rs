@@ -8,6 +8,7 @@
 //! nothing.
 
 use super::Film;
+use rayon::prelude::*;
 
 /// What a neighbour is, seen from a pixel.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -62,7 +63,9 @@ impl Jacobian {
 
 impl<'a> HitMap<'a> {
     pub fn new(film: &'a Film) -> HitMap<'a> {
-        let keys = (film.u.iter().zip(&film.v).zip(&film.events))
+        // In parallel: a serial pass over the image was 0.6 ms of the
+        // sphere's PRSS stage on 2 threads.
+        let keys = (film.u.par_iter().zip(&film.v).zip(&film.events))
             .map(|((u, v), &e)| {
                 if u.is_finite() && v.is_finite() {
                     e

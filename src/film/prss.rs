@@ -1696,17 +1696,24 @@ pub fn shade(
         }
         _ => None,
     };
-    let rows: Vec<(Vec<[f32; 3]>, Vec<u32>, PostStats)> = (0..film.height as i64)
-        .into_par_iter()
-        .map(|y| {
+    // Each row shades into its place in the output: collecting rows and
+    // concatenating them was a serial copy of the whole image (sphere,
+    // 512×512: 1.5–1.9 ms of a 13 ms stage on 2 threads).
+    let w = film.width as usize;
+    let mut color = vec![[0.0f32; 3]; w * film.height as usize];
+    let rows: Vec<(Vec<u32>, PostStats)> = color
+        .par_chunks_mut(w.max(1))
+        .enumerate()
+        .map(|(y, colors)| {
+            let y = y as i64;
             let mut st = PostStats::default();
-            let mut colors = Vec::with_capacity(film.width as usize);
             let mut flagged = Vec::new();
             let classes = match interior {
                 Some((size, _)) => interior_row(film, y, size),
                 None => Vec::new(),
             };
-            for x in 0..film.width as i64 {
+            for (x, out) in colors.iter_mut().enumerate() {
+                let x = x as i64;
                 let pixel = (y * c.map.w + x) as u32;
                 let hit = c.map.at(x, y).is_some();
                 let col = if !hit {
@@ -1724,30 +1731,29 @@ pub fn shade(
                         Mode::Footprint => footprint_pixel(&c, x, y, &mut st),
                     }
                 };
-                match col {
-                    Some(col) => colors.push(col),
+                *out = match col {
+                    Some(col) => col,
                     None => {
                         flagged.push(pixel);
                         st.pixels_flagged += 1;
                         let i = pixel as usize;
-                        colors.push(if hit {
+                        if hit {
                             backdrop.color(film.u[i] as f64, film.v[i] as f64)
                         } else {
                             background
-                        });
+                        }
                     }
-                }
+                };
             }
-            (colors, flagged, st)
+            (flagged, st)
         })
         .collect();
     let mut out = PostResult {
-        color: Vec::with_capacity((film.width * film.height) as usize),
+        color,
         flagged: Vec::new(),
         stats: PostStats::default(),
     };
-    for (c, f, st) in rows {
-        out.color.extend(c);
+    for (f, st) in rows {
         out.flagged.extend(f);
         out.stats.add(&st);
     }
