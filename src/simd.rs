@@ -218,10 +218,12 @@ pub unsafe fn cubic_value_grad(
 /// its result per lane: lane `l`'s neighbourhood starts at `data[base[l]]`
 /// (rows `j·sy + k·sz`) and its fractional position on axis `a` is
 /// `t[a][l]`; `poly[j]` is the kernel's weight polynomial `j` (lowest
-/// coefficient first), evaluated as the scalar weights are. Each of `cubic_value_grad`'s vectors along x
-/// becomes four vectors across the lanes, one per x offset; its fused sums
-/// and the order of its final dot products, `(p0 + p2) + (p1 + p3)`, are
-/// kept.
+/// coefficient first), evaluated as the scalar weights are. Each of
+/// `cubic_value_grad`'s vectors along x becomes four vectors across the
+/// lanes, one per x offset; its fused sums and the order of its final dot
+/// products, `(p0 + p2) + (p1 + p3)`, are kept. (Left to the compiler, the
+/// same loops over lane arrays became 128-bit code, slower than one point
+/// at a time.)
 ///
 /// # Safety
 /// The CPU must have AVX-512F and FMA ([`Isa::Avx512`]), and every row

@@ -367,9 +367,9 @@ impl<T: Coefficient> Field<T> {
     /// its result point by point. For cubic kernels over `f64` coefficients
     /// under AVX-512 (`L == 8`) the points are located one by one, then
     /// weighted and contracted in vector lanes together by
-    /// [`crate::simd::cubic_value_grad_x8`]. A point at a
-    /// time, locating it, its weights and the reductions' horizontal sums
-    /// were a chain of scalar work per ray.
+    /// [`crate::simd::cubic_value_grad_x8`]: one point at a time, the
+    /// weights and the final horizontal sums were a chain of scalar work per
+    /// crossing (single-thread sphere refract stage 32 → 30 ms).
     ///
     /// Every other filter, storage or vector width takes
     /// [`Field::value_grad_fast`] lane by lane.

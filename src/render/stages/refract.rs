@@ -191,7 +191,8 @@ fn refract_runs<const S: usize, const L: usize, T: Coefficient>(
 
 /// A run's crossings: the incoming directions, the field and its gradient
 /// (grid units) there, and `n1 / n2` for each ray. Lanes past the run's end
-/// stay zero (a degenerate normal, ignored).
+/// hold a zero direction and the field at the grid's origin; what they bend
+/// to is never read.
 #[derive(Default)]
 struct Crossings {
     dir: [[f64; RUN]; 3],
