@@ -9,6 +9,7 @@
 
 pub mod footprint;
 pub(crate) mod hitmap;
+mod interior;
 pub mod merge;
 pub mod metrics;
 pub mod prss;

@@ -49,6 +49,10 @@ use crate::scene::{Backdrop, FootprintFilter, Pattern, PrssFallback, PrssMap, Re
 use super::Film;
 use super::footprint;
 use super::hitmap::{HitMap, Jacobian, NO_HIT, Neighbour};
+use super::interior::{Interior, classify_rows};
+
+/// Rows shaded per parallel task ([`shade`]).
+const BAND_ROWS: usize = 16;
 
 /// Which reconstruction to use.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -1162,7 +1166,7 @@ fn box_in_one_square(lo: f64, hi: f64, m: f64, inv: f64) -> bool {
 
 /// The arithmetic [`footprint_box`] needs: the `f64` test and the `f32` row
 /// pass compute the same bound.
-trait Real:
+pub(super) trait Real:
     Copy
     + PartialOrd
     + std::ops::Add<Output = Self>
@@ -1213,7 +1217,7 @@ fn minr<R: Real>(a: R, b: R) -> R {
 /// how far the bicubic map strays from it; and the grid's largest `|value|`,
 /// to scale the rounding slack by.
 #[inline(always)]
-fn footprint_box<R: Real>(at: impl Fn(usize, usize) -> R) -> (R, R, R, R) {
+pub(super) fn footprint_box<R: Real>(at: impl Fn(usize, usize) -> R) -> (R, R, R, R) {
     let zero = R::of(0.0);
     let mut big = zero;
     for j in 0..5 {
@@ -1343,118 +1347,9 @@ fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
     Some(acc.map(|v| (v / (n * n) as f64) as f32))
 }
 
-/// How a pixel of a row relates to the fast path of the bicubic map over a
-/// checkerboard ([`interior_row`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
-enum Interior {
-    /// Some hit of the 5×5 neighbourhood is missing, not finite or on
-    /// another piece (or the pixel is within two of the border): the
-    /// general path.
-    No,
-    /// The whole neighbourhood is on the centre's piece and the map over
-    /// the pixel provably stays in the centre's square.
-    OneSquare,
-    /// On the centre's piece, but the map may reach another square.
-    Straddles,
-}
-
-/// Classifies every pixel of row `y` for [`prss_interior_checker`]: whether
-/// its 5×5 neighbourhood is on one piece, and whether the bicubic map over
-/// it stays in one checker square of side `size` — the bound of
-/// [`bicubic_in_one_square`] (the bilinear map at the pixel's corners, edge
-/// midpoints and centre, widened by the second differences), for
-/// [`LANES`] pixels at a time.
-///
-/// It runs on the film's `f32` hits in `f32` lanes (under
-/// [`crate::with_isa!`], so AVX2 or AVX-512 where there is one), with no
-/// branch per pixel. The rounding slack is `1e-5` of the largest hit and of
-/// the square (the `f64` test's is `1e-9`): far above the `f32` rounding of
-/// these few operations, so the claim holds for the exact map and for the
-/// `f64` sub-points of [`checker_average`]. A claim changes no colour (see
-/// [`bicubic_in_one_square`]), only the work. Comparisons with NaN fail and
-/// non-finite hits are never on a piece, so those pixels are
-/// [`Interior::No`].
-fn interior_row(film: &Film, y: i64, size: f64) -> Vec<Interior> {
-    let (w, h) = (film.width as usize, film.height as i64);
-    let mut out = vec![Interior::No; w];
-    if y < 2 || y + 2 >= h || w < 5 {
-        return out;
-    }
-    let isa = crate::simd::Isa::current();
-    crate::with_isa!(isa, _L, _M => interior_row_in(film, y as usize, size, &mut out));
-    out
-}
-
-/// Pixels [`interior_row`] classifies at once.
-const LANES: usize = 16;
-type Lane = [f32; LANES];
-
-/// `v[at..at + LANES]`, zero-filled past the end.
-#[inline(always)]
-fn load(v: &[f32], at: usize) -> Lane {
-    match v.get(at..at + LANES) {
-        Some(s) => s.try_into().unwrap(),
-        None => std::array::from_fn(|l| v.get(at + l).copied().unwrap_or(0.0)),
-    }
-}
-
-/// The body of [`interior_row`] for row `y` (two rows inside the film):
-/// pixel `x = i + 2` is lane `i − i0` of the chunk starting at `i0`, and
-/// `g[j][d]` holds the hits at row `y + j − 2`, column `x + d − 2`.
-#[inline(always)]
-fn interior_row_in(film: &Film, y: usize, size: f64, out: &mut [Interior]) {
-    let w = film.width as usize;
-    let n = w - 4;
-    let at = |j: usize| (y + j - 2) * w;
-    let ev: [&[f32]; 5] = std::array::from_fn(|j| &film.events[at(j)..at(j) + w]);
-    let q: [[&[f32]; 5]; 2] = [
-        std::array::from_fn(|j| &film.u[at(j)..at(j) + w]),
-        std::array::from_fn(|j| &film.v[at(j)..at(j) + w]),
-    ];
-    let inv = (1.0 / size) as f32;
-    let slack = 1e-5 * size as f32;
-    for i0 in (0..n).step_by(LANES) {
-        let e0 = load(ev[2], i0 + 2);
-        let mut ok = [true; LANES];
-        for j in 0..5 {
-            for d in 0..5 {
-                let (e, u, v) = (
-                    load(ev[j], i0 + d),
-                    load(q[0][j], i0 + d),
-                    load(q[1][j], i0 + d),
-                );
-                for l in 0..LANES {
-                    // Finite: `|u| < ∞` fails for NaN and ±∞.
-                    ok[l] &= (e[l] == e0[l])
-                        & (u[l].abs() < f32::INFINITY)
-                        & (v[l].abs() < f32::INFINITY);
-                }
-            }
-        }
-        let mut one = ok;
-        for qk in &q {
-            let g: [[Lane; 5]; 5] =
-                std::array::from_fn(|j| std::array::from_fn(|d| load(qk[j], i0 + d)));
-            for l in 0..LANES {
-                let (lo, hi, bend, big) = footprint_box(|j, d| g[j][d][l]);
-                let m = bend + 1e-5 * big + slack;
-                let (a, b) = ((lo - m) * inv, (hi + m) * inv);
-                one[l] &= (a.abs() < 1e15) & (b.abs() < 1e15) & (a.floor() == b.floor());
-            }
-        }
-        for (l, o) in out[i0 + 2..(i0 + LANES).min(n) + 2].iter_mut().enumerate() {
-            *o = match (ok[l], one[l]) {
-                (false, _) => Interior::No,
-                (true, true) => Interior::OneSquare,
-                (true, false) => Interior::Straddles,
-            };
-        }
-    }
-}
-
 /// PRSS colour of a pixel whose whole 5×5 neighbourhood reaches the backdrop
 /// on the centre's piece — most pixels of a frame — for the bicubic map over
-/// a checkerboard, classified by [`interior_row`]. The general path
+/// a checkerboard, classified by [`classify_rows`]. The general path
 /// ([`prss_pixel`]) classifies each neighbour and fills a grid; here the
 /// film's rows fill it directly, and a pixel in one square takes the
 /// centre's colour, which [`checker_average`] would return too. Same colour
@@ -1479,6 +1374,32 @@ fn prss_interior_checker(
         std::array::from_fn(|i| [film.u[start + i] as f64, film.v[start + i] as f64])
     });
     checker_average(&g, &c.taps, size, colors)
+}
+
+/// Pixels per vector run of [`one_square_colours`].
+const ONE_SQUARE_RUN: usize = 8;
+
+/// The checker colours at the hits `u[..8]`, `v[..8]` (film values, as `f64`)
+/// into `out`: what [`Backdrop::color`] gives each ([`prss_interior_checker`]
+/// for [`Interior::OneSquare`] pixels), with the same divisions and floors,
+/// a run at a time ([`crate::simd::odd_floor_sum_mask`]).
+fn one_square_colours(
+    u: &[f32],
+    v: &[f32],
+    size: f64,
+    colors: &[[f32; 3]; 2],
+    out: &mut [[f32; 3]],
+) {
+    let isa = crate::simd::Isa::current();
+    crate::with_isa!(isa, L, _M => {
+        let x: [f64; 8] = std::array::from_fn(|l| u[l] as f64 / size);
+        let y: [f64; 8] = std::array::from_fn(|l| v[l] as f64 / size);
+        // SAFETY: L is bound by `with_isa!` for the running instruction set.
+        let odd = unsafe { crate::simd::odd_floor_sum_mask::<L>(&x, &y) };
+        for (l, o) in out[..ONE_SQUARE_RUN].iter_mut().enumerate() {
+            *o = colors[((odd >> l) & 1) as usize];
+        }
+    })
 }
 
 /// The average of a checkerboard over the sub-points `taps` of the map `g`:
@@ -1696,24 +1617,45 @@ pub fn shade(
         }
         _ => None,
     };
-    // Each row shades into its place in the output: collecting rows and
-    // concatenating them was a serial copy of the whole image (sphere,
-    // 512×512: 1.5–1.9 ms of a 13 ms stage on 2 threads).
+    // Each band of rows shades into its place in the output: collecting rows
+    // and concatenating them was a serial copy of the whole image (sphere,
+    // 512×512: 1.5–1.9 ms of a 13 ms stage on 2 threads). Bands, not rows,
+    // so the fast path's classification reads each row's window maxima for
+    // several rows ([`interior`]).
     let w = film.width as usize;
     let mut color = vec![[0.0f32; 3]; w * film.height as usize];
-    let rows: Vec<(Vec<u32>, PostStats)> = color
-        .par_chunks_mut(w.max(1))
+    let bands: Vec<(Vec<u32>, PostStats)> = color
+        .par_chunks_mut((w * BAND_ROWS).max(1))
         .enumerate()
-        .map(|(y, colors)| {
-            let y = y as i64;
+        .map(|(band, colors)| {
+            let y0 = band * BAND_ROWS;
+            let rows = colors.len() / w.max(1);
             let mut st = PostStats::default();
             let mut flagged = Vec::new();
-            let classes = match interior {
-                Some((size, _)) => interior_row(film, y, size),
-                None => Vec::new(),
-            };
-            for (x, out) in colors.iter_mut().enumerate() {
-                let x = x as i64;
+            let mut classes = Vec::new();
+            if let Some((size, _)) = interior {
+                classes = vec![Interior::No; rows * w];
+                classify_rows(film, y0, y0 + rows, size, &mut classes);
+            }
+            let mut i = 0;
+            while i < colors.len() {
+                // Runs of pixels in one square: their centres' colours in
+                // vector lanes (most pixels of a frame).
+                if let Some((size, checker)) = interior
+                    && i % w + ONE_SQUARE_RUN <= w
+                    && classes[i..i + ONE_SQUARE_RUN]
+                        .iter()
+                        .all(|&c| c == Interior::OneSquare)
+                {
+                    let at = y0 * w + i;
+                    let run = &mut colors[i..i + ONE_SQUARE_RUN];
+                    one_square_colours(&film.u[at..], &film.v[at..], size, checker, run);
+                    st.pixels += ONE_SQUARE_RUN as u64;
+                    st.quadrants_interpolated += 4 * ONE_SQUARE_RUN as u64;
+                    i += ONE_SQUARE_RUN;
+                    continue;
+                }
+                let (x, y) = ((i % w) as i64, (y0 + i / w) as i64);
                 let pixel = (y * c.map.w + x) as u32;
                 let hit = c.map.at(x, y).is_some();
                 let col = if !hit {
@@ -1721,7 +1663,7 @@ pub fn shade(
                 } else {
                     st.pixels += 1;
                     match s.mode {
-                        Mode::Prss => match (interior, classes.get(x as usize)) {
+                        Mode::Prss => match (interior, classes.get(i)) {
                             (Some((size, colors)), Some(&class)) if class != Interior::No => {
                                 st.quadrants_interpolated += 4;
                                 Some(prss_interior_checker(&c, film, (x, y), class, size, colors))
@@ -1731,19 +1673,20 @@ pub fn shade(
                         Mode::Footprint => footprint_pixel(&c, x, y, &mut st),
                     }
                 };
-                *out = match col {
+                colors[i] = match col {
                     Some(col) => col,
                     None => {
                         flagged.push(pixel);
                         st.pixels_flagged += 1;
-                        let i = pixel as usize;
+                        let p = pixel as usize;
                         if hit {
-                            backdrop.color(film.u[i] as f64, film.v[i] as f64)
+                            backdrop.color(film.u[p] as f64, film.v[p] as f64)
                         } else {
                             background
                         }
                     }
                 };
+                i += 1;
             }
             (flagged, st)
         })
@@ -1753,7 +1696,7 @@ pub fn shade(
         flagged: Vec::new(),
         stats: PostStats::default(),
     };
-    for (f, st) in rows {
+    for (f, st) in bands {
         out.flagged.extend(f);
         out.stats.add(&st);
     }
@@ -1765,6 +1708,13 @@ mod tests {
     use glam::DVec3;
 
     use super::*;
+
+    /// The fast path's classes of film row `y`.
+    fn interior_row(film: &Film, y: i64, size: f64) -> Vec<Interior> {
+        let mut out = vec![Interior::No; film.width as usize];
+        classify_rows(film, y as usize, y as usize + 1, size, &mut out);
+        out
+    }
     use crate::scene::Pattern;
 
     #[test]
