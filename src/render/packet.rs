@@ -136,6 +136,30 @@ impl<'a> Rays<'a> {
         i
     }
 
+    /// Appends the pixel-centre rays of `len ≤ 8` pixels sharing the origin
+    /// `org` (a perspective camera's): their identities (image pixels from
+    /// `pixel`, output slots from `slot`, consecutive), unit weight, and
+    /// directions `dir[axis][lane]`. A slice per column where a push per ray
+    /// and column cost most of the generate stage.
+    #[inline]
+    pub fn push_centre_run(
+        &mut self,
+        (pixel, slot): (u32, u32),
+        len: usize,
+        org: DVec3,
+        dir: &[[f64; 8]; 3],
+    ) {
+        let ids: [u32; 8] = [0, 1, 2, 3, 4, 5, 6, 7];
+        self.pixel.extend_from_slice(&ids.map(|l| pixel + l)[..len]);
+        self.slot.extend_from_slice(&ids.map(|l| slot + l)[..len]);
+        self.weight.extend_from_slice(&[1.0; 8][..len]);
+        self.centre.extend_from_slice(&[true; 8][..len]);
+        for a in 0..3 {
+            self.org[a].extend_from_slice(&[org[a]; 8][..len]);
+            self.dir[a].extend_from_slice(&dir[a][..len]);
+        }
+    }
+
     /// Brings every other column up to the pushed rays, with the values a
     /// fresh ray starts from.
     pub fn complete(&mut self) {

@@ -6,8 +6,6 @@
 //! from a counter-based generator keyed by (seed, pixel, sample), so it is the
 //! same for any tile size or thread count.
 
-use glam::DVec3;
-
 use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
 use super::super::tile::{Region, Sampling, Tile};
@@ -99,19 +97,18 @@ pub fn generate<T: Coefficient>(
 /// [`Camera::ray`].
 #[inline(always)]
 fn centre_rays(cam: &Camera, tile: Tile, width: u32, rays: &mut Rays, out: &mut Queue) {
+    let first = rays.len() as u32;
     for py in tile.y0..tile.y1 {
         let y = py as f64 + 0.5;
         for x0 in (tile.x0..tile.x1).step_by(RUN) {
             let xs: [f64; RUN] = std::array::from_fn(|l| (x0 + l as u32) as f64 + 0.5);
             let d = cam.directions(&xs, y).expect("a perspective camera");
-            for l in 0..RUN.min((tile.x1 - x0) as usize) {
-                let dir = DVec3::new(d[0][l], d[1][l], d[2][l]);
-                let x = x0 + l as u32;
-                let slot = (py - tile.y0) * tile.width() + (x - tile.x0);
-                out.push(rays.push((py * width + x, slot), 1.0, true, cam.position, dir));
-            }
+            let len = RUN.min((tile.x1 - x0) as usize);
+            let slot = (py - tile.y0) * tile.width() + (x0 - tile.x0);
+            rays.push_centre_run((py * width + x0, slot), len, cam.position, &d);
         }
     }
+    out.extend(first..rays.len() as u32);
 }
 
 /// Pixels per run of [`centre_rays`]: one AVX-512 vector of `f64`.
