@@ -138,6 +138,74 @@ impl<T: Coefficient> Field<T> {
         out: &mut [[f64; L]; N],
     ) {
         let kernel = self.kernel();
+        let coeffs = self.coeffs();
+        let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
+        let data = coeffs.data();
+        let span = (S - 1) * (sy + sz) + S;
+        for l in 0..L {
+            assert!(
+                seg.base[l] + span <= data.len(),
+                "lane neighbourhood inside the grid"
+            );
+        }
+        #[cfg(target_arch = "x86_64")]
+        if S == 4 && L == 8 && M::FUSED && crate::simd::Isa::current() == crate::simd::Isa::Avx512 {
+            let mut poly = [[0.0; 4]; 4];
+            for (j, p) in poly.iter_mut().enumerate() {
+                p.copy_from_slice(&kernel.weight_poly(j)[..4]);
+            }
+            let lanes = |v: &[[f64; L]; 3]| -> [[f64; 8]; 3] {
+                let mut o = [[0.0; 8]; 3];
+                for a in 0..3 {
+                    o[a].copy_from_slice(&v[a]);
+                }
+                o
+            };
+            let mut base = [0usize; 8];
+            base.copy_from_slice(&seg.base);
+            let mut g = [[0.0f64; 8]; N];
+            // SAFETY: AVX-512 and FMA checked above; every row lies in
+            // `base + span <= data.len()` (asserted).
+            unsafe {
+                crate::simd::restrict_cubic_x8(
+                    data,
+                    &base,
+                    (sy, sz),
+                    &lanes(&seg.tau),
+                    &lanes(&seg.delta),
+                    &poly,
+                    iso,
+                    &mut g,
+                )
+            };
+            for (o, v) in out.iter_mut().zip(&g) {
+                o.copy_from_slice(v);
+            }
+            return;
+        }
+        self.restrict_lanes_generic::<S, L, M>(seg, iso, out)
+    }
+
+    /// [`Field::restrict_lanes`] for any support and lane count, in
+    /// loops over lanes left to the compiler.
+    #[inline(always)]
+    fn restrict_lanes_generic<const S: usize, const L: usize, M: Madd>(
+        &self,
+        seg: &LaneSegments<L>,
+        iso: f64,
+        out: &mut [[f64; L]; N],
+    ) {
+        let kernel = self.kernel();
+        let coeffs = self.coeffs();
+        let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
+        let data = coeffs.data();
+        let span = (S - 1) * (sy + sz) + S;
+        for l in 0..L {
+            assert!(
+                seg.base[l] + span <= data.len(),
+                "lane neighbourhood inside the grid"
+            );
+        }
         // w[a][j][m][lane]: weight polynomial j of axis a composed with the segment.
         let mut w = [[[[0.0f64; L]; S]; S]; 3];
         for a in 0..3 {
@@ -164,16 +232,6 @@ impl<T: Coefficient> Field<T> {
                     }
                 }
             }
-        }
-        let coeffs = self.coeffs();
-        let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
-        let data = coeffs.data();
-        let span = (S - 1) * (sy + sz) + S;
-        for l in 0..L {
-            assert!(
-                seg.base[l] + span <= data.len(),
-                "lane neighbourhood inside the grid"
-            );
         }
         let d1 = S - 1;
         let mut g = [[0.0f64; L]; N];
@@ -231,6 +289,75 @@ impl<T: Coefficient> Field<T> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The AVX-512 cubic kernel gives the generic lane loops' coefficients
+    /// bit for bit (both fused), for cubic filters over both storages, on
+    /// segments in general position and along axes and diagonals.
+    #[test]
+    fn cubic_kernel_is_the_generic_restriction_bitwise() {
+        use crate::phantom::{mix64, uniform};
+        if crate::simd::Isa::current() != crate::simd::Isa::Avx512 {
+            eprintln!("no AVX-512: the kernel is not used here");
+            return;
+        }
+        let dims = [12usize, 11, 13];
+        let vol = crate::volume::scrambled_u8(dims, 3);
+        let mut checked = 0;
+        for name in ["bspline3", "catmull-rom", "smooth-bspline3"] {
+            let kind = FilterKind::parse(name, 0.5).unwrap();
+            let f64s = Field::new(&vol, kind);
+            let f32s = Field::<f32>::new_f32(&vol, kind);
+            for k in 0..300u64 {
+                let r = |j: u64| uniform(mix64(k), j);
+                let mut seg = LaneSegments::<8> {
+                    base: [0; 8],
+                    tau: [[0.0; 8]; 3],
+                    delta: [[0.0; 8]; 3],
+                };
+                for l in 0..8 {
+                    let j = 16 * l as u64;
+                    let cell = [0, 1, 2].map(|a| 2 + (r(j + a) * 7.0) as i64);
+                    let off = f64s.kernel().knot_offset();
+                    let p0: [f64; 3] =
+                        std::array::from_fn(|a| cell[a] as f64 - off + r(j + 3 + a as u64));
+                    let mut p1: [f64; 3] =
+                        std::array::from_fn(|a| cell[a] as f64 - off + r(j + 6 + a as u64));
+                    if k % 5 == 0 {
+                        // Along an axis.
+                        p1 = [p0[0], p0[1], p1[2]];
+                    }
+                    let (base, tau, delta) = f64s.lane_segment(cell, p0, p1);
+                    seg.base[l] = base;
+                    for a in 0..3 {
+                        seg.tau[a][l] = tau[a];
+                        seg.delta[a][l] = delta[a];
+                    }
+                }
+                let iso = 100.0 + r(999);
+                let isa = crate::simd::Isa::Avx512;
+                crate::with_isa!(isa, L, M => {
+                    if L == 8 {
+                        let seg8 = LaneSegments::<L> {
+                            base: std::array::from_fn(|l| seg.base[l]),
+                            tau: std::array::from_fn(|a| std::array::from_fn(|l| seg.tau[a][l])),
+                            delta: std::array::from_fn(|a| std::array::from_fn(|l| seg.delta[a][l])),
+                        };
+                        let (mut a, mut b) = ([[0.0; L]; N], [[0.0; L]; N]);
+                        f64s.restrict_lanes::<4, L, M>(&seg8, iso, &mut a);
+                        f64s.restrict_lanes_generic::<4, L, M>(&seg8, iso, &mut b);
+                        assert_eq!(a.map(|r| r.map(f64::to_bits)), b.map(|r| r.map(f64::to_bits)), "{name} f64 {k}");
+                        f32s.restrict_lanes::<4, L, M>(&seg8, iso, &mut a);
+                        f32s.restrict_lanes_generic::<4, L, M>(&seg8, iso, &mut b);
+                        assert_eq!(a.map(|r| r.map(f64::to_bits)), b.map(|r| r.map(f64::to_bits)), "{name} f32 {k}");
+                        // Degree 9 needs motion along every axis.
+                        assert!(k % 5 == 0 || a[9].iter().all(|&c| c != 0.0));
+                    }
+                });
+                checked += 1;
+            }
+        }
+        assert_eq!(checked, 900);
+    }
     use crate::filter::FilterKind;
     use crate::roots::bernstein::BernsteinBasis;
     use crate::with_support;
