@@ -35,6 +35,7 @@ macro_rules! with_field {
         match $any {
             $crate::prepare::AnyField::F64($f) => $body,
             $crate::prepare::AnyField::F32($f) => $body,
+            $crate::prepare::AnyField::F16($f) => $body,
         }
     };
 }
@@ -159,21 +160,25 @@ impl Accel {
 pub enum AnyField {
     F64(Arc<Field<f64>>),
     F32(Arc<Field<f32>>),
+    F16(Arc<Field<half::f16>>),
 }
 
 impl AnyField {
-    /// Prefilters `vol` for `filter` into `storage`.
-    pub fn new(vol: &Volume, filter: FilterKind, storage: Storage) -> AnyField {
-        match storage {
+    /// Prefilters `vol` for `filter` into `storage`; `f16` refuses
+    /// coefficients beyond its range.
+    pub fn new(vol: &Volume, filter: FilterKind, storage: Storage) -> Result<AnyField, SceneError> {
+        Ok(match storage {
             Storage::F64 => AnyField::F64(Arc::new(Field::new(vol, filter))),
             Storage::F32 => AnyField::F32(Arc::new(Field::<f32>::new_in(vol, filter))),
-        }
+            Storage::F16 => AnyField::F16(Arc::new(f16_field(Field::<f32>::new_in(vol, filter))?)),
+        })
     }
 
     pub fn storage(&self) -> Storage {
         match self {
             AnyField::F64(_) => Storage::F64,
             AnyField::F32(_) => Storage::F32,
+            AnyField::F16(_) => Storage::F16,
         }
     }
 
@@ -181,7 +186,7 @@ impl AnyField {
     pub fn as_f64(&self) -> Option<&Field<f64>> {
         match self {
             AnyField::F64(f) => Some(f),
-            AnyField::F32(_) => None,
+            _ => None,
         }
     }
 
@@ -202,9 +207,26 @@ impl AnyField {
         match (self, other) {
             (AnyField::F64(a), AnyField::F64(b)) => Arc::ptr_eq(a, b),
             (AnyField::F32(a), AnyField::F32(b)) => Arc::ptr_eq(a, b),
+            (AnyField::F16(a), AnyField::F16(b)) => Arc::ptr_eq(a, b),
             _ => false,
         }
     }
+}
+
+/// `f` rounded once to `f16`, or an error naming the largest coefficient
+/// when some lie beyond `f16`'s range (they would become infinite).
+fn f16_field(f: Field<f32>) -> Result<Field<half::f16>, SceneError> {
+    let max = f.max_abs_coeff();
+    if max.is_nan() || max > half::f16::MAX.to_f64() {
+        return Err(SceneError::Storage {
+            storage: Storage::F16.name(),
+            msg: format!(
+                "the largest prefiltered coefficient, {max:.6e}, is beyond f16's range (±65504); \
+                 use \"f32\" or \"f64\""
+            ),
+        });
+    }
+    Ok(Field::from_coeffs(f.kind(), f.coeffs().convert()))
 }
 
 /// Inputs of one frame.
@@ -219,14 +241,18 @@ pub struct Prepared {
 impl Prepared {
     /// Prefilters `volume` for `filter`, without acceleration structures.
     pub fn new(volume: Arc<Volume>, filter: FilterKind) -> Prepared {
-        Prepared::new_in(volume, filter, Storage::F64)
+        Prepared::new_in(volume, filter, Storage::F64).expect("f64 holds every coefficient")
     }
 
     /// [`Prepared::new`] with coefficients stored as `storage`.
-    pub fn new_in(volume: Arc<Volume>, filter: FilterKind, storage: Storage) -> Prepared {
+    pub fn new_in(
+        volume: Arc<Volume>,
+        filter: FilterKind,
+        storage: Storage,
+    ) -> Result<Prepared, SceneError> {
         let start = Instant::now();
-        let field = AnyField::new(&volume, filter, storage);
-        Prepared {
+        let field = AnyField::new(&volume, filter, storage)?;
+        Ok(Prepared {
             volume,
             field,
             accel: None,
@@ -234,7 +260,7 @@ impl Prepared {
                 prefilter_s: start.elapsed().as_secs_f64(),
                 ..Default::default()
             },
-        }
+        })
     }
 
     /// Adds the classification and octree `method` at `iso` (timed).
@@ -414,7 +440,7 @@ impl Cache {
                 let f = match loaded {
                     Some(f) => f,
                     None => {
-                        let f = AnyField::new(&volume, filter, storage);
+                        let f = AnyField::new(&volume, filter, storage)?;
                         if let Some(p) = &disk {
                             self.write_or_warn(p, |w| with_field!(&f, f => write_field(w, f)));
                         }
@@ -501,6 +527,9 @@ impl Cache {
             }
             Storage::F32 => {
                 read_field(path, filter, vol.dims()).map(|f| AnyField::F32(Arc::new(f)))
+            }
+            Storage::F16 => {
+                read_field(path, filter, vol.dims()).map(|f| AnyField::F16(Arc::new(f)))
             }
         };
         match read {
@@ -784,7 +813,7 @@ mod tests {
         assert!(reader.warnings.is_empty(), "{:?}", reader.warnings);
         let coeffs = |p: &Prepared| match &p.field {
             AnyField::F32(f) => f.coeffs().interior(),
-            AnyField::F64(_) => panic!("f64 storage"),
+            _ => panic!("not f32 storage"),
         };
         assert_eq!(coeffs(&narrow), coeffs(&read), "bitwise from disk");
         assert_eq!(

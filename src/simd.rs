@@ -49,15 +49,20 @@ impl Isa {
     fn detect() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
+            // F16C for the `f16` storage's row loads: every CPU with AVX2
+            // has it.
+            let f16c = std::arch::is_x86_feature_detected!("f16c");
             if std::arch::is_x86_feature_detected!("avx512f")
                 && std::arch::is_x86_feature_detected!("avx512vl")
                 && std::arch::is_x86_feature_detected!("avx512dq")
                 && std::arch::is_x86_feature_detected!("fma")
+                && f16c
             {
                 return Isa::Avx512;
             }
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
+                && f16c
             {
                 return Isa::Avx2;
             }
@@ -123,7 +128,7 @@ macro_rules! with_isa {
         match $isa {
             #[cfg(target_arch = "x86_64")]
             $crate::simd::Isa::Avx512 => {
-                #[target_feature(enable = "avx512f,avx512vl,avx512dq,fma,avx2")]
+                #[target_feature(enable = "avx512f,avx512vl,avx512dq,fma,avx2,f16c")]
                 unsafe fn run<R>(f: impl FnOnce() -> R) -> R {
                     f()
                 }
@@ -139,7 +144,7 @@ macro_rules! with_isa {
             }
             #[cfg(target_arch = "x86_64")]
             $crate::simd::Isa::Avx2 => {
-                #[target_feature(enable = "avx2,fma")]
+                #[target_feature(enable = "avx2,fma,f16c")]
                 unsafe fn run<R>(f: impl FnOnce() -> R) -> R {
                     f()
                 }
@@ -314,7 +319,7 @@ pub unsafe fn cubic_value_grad_x8(
 /// The CPU must have AVX-512F and FMA ([`Isa::Avx512`]), and every row
 /// `base[l] + j·sy + k·sz .. + 4` (`j, k < 4`) must lie in `data`.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,fma")]
+#[target_feature(enable = "avx512f,fma,f16c")]
 #[inline]
 #[allow(clippy::too_many_arguments)]
 pub unsafe fn restrict_cubic_x8<T: Row4>(
@@ -398,7 +403,7 @@ pub unsafe fn restrict_cubic_x8<T: Row4>(
 /// # Safety
 /// As [`rows4x8`].
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
+#[target_feature(enable = "avx512f,f16c")]
 #[inline]
 unsafe fn rows4x8_regs<T: Row4>(
     ptr: *const T,
@@ -508,6 +513,28 @@ impl Row4 for f64 {
     }
 }
 
+impl Row4 for half::f16 {
+    #[cfg(target_arch = "x86_64")]
+    #[inline(always)]
+    unsafe fn load4(p: *const half::f16) -> std::arch::x86_64::__m256d {
+        use std::arch::x86_64::{__m128i, _mm_loadl_epi64, _mm256_cvtps_pd};
+        // SAFETY: forwarded from the caller; F16C comes with AVX2 on every
+        // x86 CPU this runs its vector paths on (checked in `Isa::detect`).
+        unsafe {
+            let h = _mm_loadl_epi64(p as *const __m128i);
+            _mm256_cvtps_pd(cvtph_ps(h))
+        }
+    }
+}
+
+/// Four `f16` (the low 64 bits of `h`) as `f32`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "f16c")]
+#[inline]
+unsafe fn cvtph_ps(h: std::arch::x86_64::__m128i) -> std::arch::x86_64::__m128 {
+    std::arch::x86_64::_mm_cvtph_ps(h)
+}
+
 impl Row4 for f32 {
     #[cfg(target_arch = "x86_64")]
     #[inline(always)]
@@ -519,7 +546,7 @@ impl Row4 for f32 {
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f")]
+#[target_feature(enable = "avx512f,f16c")]
 #[inline]
 unsafe fn rows4x8<T: Row4>(ptr: *const T, idx: *const usize) -> [[f64; 8]; 4] {
     use std::arch::x86_64::*;
@@ -544,7 +571,7 @@ unsafe fn rows4x8<T: Row4>(ptr: *const T, idx: *const usize) -> [[f64; 8]; 4] {
 }
 
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2")]
+#[target_feature(enable = "avx2,f16c")]
 #[inline]
 unsafe fn rows4x4<T: Row4>(ptr: *const T, idx: *const usize) -> [[f64; 4]; 4] {
     use std::arch::x86_64::*;

@@ -117,7 +117,7 @@ fn hits_agree(scene: &Scene, vol: Arc<Volume>, variants: &[&[&str]]) {
     let storage = scene.render.coefficients;
     let base = render::render(
         scene,
-        &Prepared::new_in(vol.clone(), scene.surface.filter, storage),
+        &Prepared::new_in(vol.clone(), scene.surface.filter, storage).unwrap(),
         None,
     );
     assert_eq!(base.stats.counters.undefined, 0);
@@ -134,6 +134,7 @@ fn hits_agree(scene: &Scene, vol: Arc<Volume>, variants: &[&[&str]]) {
         let method = s.render.classify.unwrap();
         assert_eq!(s.render.coefficients, storage, "variants keep the storage");
         let prep = Prepared::new_in(vol.clone(), s.surface.filter, storage)
+            .unwrap()
             .with_accel(s.surface.iso, method);
         let f = render::render(&s, &prep, None);
         let mut worst = 0.0f64;
@@ -239,6 +240,7 @@ fn with_and_without(
 ) -> (render::Frame, render::Frame) {
     let method = scene.render.classify.unwrap();
     let prep = Prepared::new_in(vol, scene.surface.filter, scene.render.coefficients)
+        .unwrap()
         .with_accel(scene.surface.iso, method);
     let mut other = scene.clone();
     off(&mut other);

@@ -1,5 +1,6 @@
-//! Coefficient storage: `f32` fields render what `f64` fields render, within
-//! the rounding of 4-byte coefficients.
+//! Coefficient storage: `f32` and `f16` fields render what `f64` fields
+//! render, within the rounding of their coefficients; `f16` refuses fields
+//! beyond its range.
 
 use std::path::PathBuf;
 
@@ -8,10 +9,10 @@ use snell::render;
 use snell::scene::{Scene, Storage};
 use snell::volume::LoadOptions;
 
-#[test]
-fn f32_storage_stays_within_its_rounding_of_f64() {
+/// The sphere at 128×128 with coefficients stored as `storage`.
+fn frame(storage: &str) -> render::Frame {
     let path = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes/sphere.toml");
-    let frame = |storage: &str| {
+    {
         let o = [
             "image.width=128",
             "image.height=128",
@@ -27,17 +28,19 @@ fn f32_storage_stays_within_its_rounding_of_f64() {
             .unwrap();
         assert_eq!(prep.field.storage().name(), storage);
         render::render(&scene, &prep, None)
-    };
-    let (a, b) = (frame("f64"), frame("f32"));
-    assert_eq!(Storage::F32.name(), "f32");
-    let (mut same_events, mut hits, mut diffs) = (0, 0, Vec::new());
+    }
+}
+
+/// Pixels with the same event count, and the sorted hit differences of the
+/// refracted ones among them (backdrop units).
+fn differences(a: &render::Frame, b: &render::Frame) -> (usize, Vec<f64>) {
+    let (mut same_events, mut diffs) = (0, Vec::new());
     for i in 0..a.film.u.len() {
         if a.film.events[i] != b.film.events[i] {
             continue;
         }
         same_events += 1;
         if a.film.events[i] > 0.0 && a.film.u[i].is_finite() && b.film.u[i].is_finite() {
-            hits += 1;
             let d = (a.film.u[i] - b.film.u[i])
                 .abs()
                 .max((a.film.v[i] - b.film.v[i]).abs());
@@ -45,6 +48,15 @@ fn f32_storage_stays_within_its_rounding_of_f64() {
         }
     }
     diffs.sort_by(f64::total_cmp);
+    (same_events, diffs)
+}
+
+#[test]
+fn f32_storage_stays_within_its_rounding_of_f64() {
+    let (a, b) = (frame("f64"), frame("f32"));
+    assert_eq!(Storage::F32.name(), "f32");
+    let (same_events, diffs) = differences(&a, &b);
+    let hits = diffs.len();
     let n = a.film.u.len();
     let q = |p: f64| diffs[((diffs.len() - 1) as f64 * p) as usize];
     eprintln!(
@@ -64,4 +76,63 @@ fn f32_storage_stays_within_its_rounding_of_f64() {
         q(0.5),
         q(0.9)
     );
+}
+
+#[test]
+fn f16_storage_stays_within_its_rounding_of_f64() {
+    // 11 significant bits: on 0..255 data a coefficient moves by up to
+    // 0.06, the surface by thousandths of a voxel. Measured at 512×512
+    // (BENCHMARKS.md): refracted p50 0.005, p90 0.04 checker squares.
+    let (a, b) = (frame("f64"), frame("f16"));
+    let (same_events, diffs) = differences(&a, &b);
+    let n = a.film.u.len();
+    let q = |p: f64| diffs[((diffs.len() - 1) as f64 * p) as usize];
+    eprintln!(
+        "events equal {same_events}/{n}, refracted {}: p50 {:.2e} p90 {:.2e} max {:.2e}",
+        diffs.len(),
+        q(0.5),
+        q(0.9),
+        q(1.0)
+    );
+    assert!(diffs.len() > 3000, "the sphere refracts: {}", diffs.len());
+    assert!(same_events * 1000 >= n * 995, "{same_events} of {n}");
+    // Coarser than f32 (whose p50 is below 1e-4) ...
+    assert!(q(0.5) > 1e-3, "p50 {}", q(0.5));
+    // ... and still far below the u8 reconstruction error (a p50 of 1.4
+    // backdrop units against the analytic sphere).
+    assert!(
+        q(0.5) < 0.2 && q(0.9) < 1.0,
+        "p50 {} p90 {}",
+        q(0.5),
+        q(0.9)
+    );
+}
+
+#[test]
+fn f16_storage_refuses_coefficients_beyond_its_range() {
+    use snell::filter::FilterKind;
+    use snell::prepare::AnyField;
+    use snell::volume::{SampleType, Volume};
+    // A step to 70000: its prefiltered coefficients overshoot past 65504.
+    let dims = [8usize, 8, 8];
+    let samples: Vec<f32> = (0..512)
+        .map(|i| if i % 8 < 4 { 0.0 } else { 70000.0 })
+        .collect();
+    let vol = Volume::new(dims, [1.0; 3], SampleType::F32, samples).unwrap();
+    let filter = FilterKind::parse("bspline3", 0.0).unwrap();
+    let err = AnyField::new(&vol, filter, Storage::F16).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("f16") && msg.contains("65504"), "{msg}");
+    // Within range, the same shape is accepted, and f32 takes either.
+    let small = Volume::new(
+        dims,
+        [1.0; 3],
+        SampleType::F32,
+        (0..512)
+            .map(|i| if i % 8 < 4 { 0.0 } else { 700.0 })
+            .collect(),
+    )
+    .unwrap();
+    assert!(AnyField::new(&small, filter, Storage::F16).is_ok());
+    assert!(AnyField::new(&vol, filter, Storage::F32).is_ok());
 }

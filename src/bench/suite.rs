@@ -662,12 +662,17 @@ pub fn phantom_side(overrides: &[String]) -> Option<usize> {
 
 fn scaling() -> Suite {
     let config = "octree+bezier bspline3 prss";
-    // The largest two also with f32 coefficients (half their memory), each
-    // right after its f64 row so the cache drops the f64 field first.
+    // The largest two also with f32 and f16 coefficients (half and a
+    // quarter of their memory), each right after its f64 row so the cache
+    // drops the f64 field first.
     let volume: Vec<Experiment> = SCALING_SIDES
         .iter()
         .flat_map(|&n| {
-            let storages: &[&str] = if n >= 512 { &["f64", "f32"] } else { &["f64"] };
+            let storages: &[&str] = if n >= 512 {
+                &["f64", "f32", "f16"]
+            } else {
+                &["f64"]
+            };
             storages.iter().map(move |&st| {
                 let mut extra = scaled_sphere(n);
                 let mut label = format!("{n}³");
@@ -720,8 +725,9 @@ machine set SNELL_MEMORY_LIMIT=22G: the default limit is 80% of what is free)"
 scale with n. Time per frame with everything prepared; the preparation (prefilter, \
 classification, octree) grows with the voxel count and is in the Preparation table. Ratio: \
 frame time over the 64³ frame's; the voxel count grows 4096× from 64³ to 1024³, the surface \
-area in cells 256×. Rows marked f32 store the coefficients in 4 bytes instead of 8 \
-(`render.coefficients = \"f32\"`): compare their peak memory and error with the row above.",
+area in cells 256×. Rows marked f32 and f16 store the coefficients in 4 and 2 bytes instead \
+of 8 (`render.coefficients = \"f32\"`, `\"f16\"`): compare their peak memory and error with \
+the f64 row.",
                 Comparison::Ratio,
                 false,
                 volume,

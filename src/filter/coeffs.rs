@@ -9,7 +9,8 @@
 //! The storage type is a parameter ([`Coefficient`]): `f64` by default, so the
 //! renderer adds no error to the filter's own (high-degree splines on noisy data
 //! have coefficients in the thousands that cancel on evaluation; `f32` storage
-//! then costs ~1e-4 on 0..255 data), `f32` where memory or bandwidth matters.
+//! then costs ~1e-4 on 0..255 data), `f32` where memory or bandwidth matters,
+//! `f16` (2 bytes, 11 significant bits) where memory matters most.
 
 use crate::volume::Volume;
 
@@ -86,6 +87,24 @@ impl Coefficient for f32 {
     #[inline(always)]
     fn from_f64(v: f64) -> Self {
         v as f32
+    }
+    #[inline(always)]
+    fn as_f64_slice(_: &[Self]) -> Option<&[f64]> {
+        None
+    }
+}
+
+impl Coefficient for half::f16 {
+    const NAME: &'static str = "f16";
+    #[inline(always)]
+    fn to_f64(self) -> f64 {
+        self.to_f64()
+    }
+    /// Rounded to nearest; beyond `±65504` the value becomes infinite
+    /// (callers check the range first, see `AnyField::new`).
+    #[inline(always)]
+    fn from_f64(v: f64) -> Self {
+        half::f16::from_f64(v)
     }
     #[inline(always)]
     fn as_f64_slice(_: &[Self]) -> Option<&[f64]> {
@@ -181,6 +200,20 @@ impl<T: Coefficient> Coeffs<T> {
 
     pub fn data_mut(&mut self) -> &mut [T] {
         &mut self.data
+    }
+
+    /// The same grid in another storage, each value converted.
+    pub fn convert<U: Coefficient>(&self) -> Coeffs<U> {
+        let mut data = vec![U::default(); self.data.len()];
+        crate::heap::advise_huge_pages(&mut data);
+        for (d, v) in data.iter_mut().zip(&self.data) {
+            *d = U::from_f64(v.to_f64());
+        }
+        Coeffs {
+            dims: self.dims,
+            padded: self.padded,
+            data,
+        }
     }
 
     /// Bytes held (for memory reports).

@@ -65,6 +65,8 @@ pub enum SceneError {
     Volume(#[from] VolumeError),
     #[error("{path}: phantom: {msg}")]
     Phantom { path: PathBuf, msg: String },
+    #[error("render.coefficients = \"{storage}\": {msg}")]
+    Storage { storage: &'static str, msg: String },
 }
 
 // ---------------------------------------------------------------------------
@@ -199,6 +201,12 @@ pub enum Storage {
     /// tested); on the glass sphere the hits move by a median 1.5e-5
     /// backdrop units (`tests/storage.rs`).
     F32,
+    /// 2 bytes per coefficient (11 significant bits, at most ±65504): a
+    /// quarter of `f64`'s memory. Prefiltered as `f32`, then rounded once;
+    /// a field whose coefficients exceed the range is refused. What it
+    /// costs in accuracy is measured in BENCHMARKS.md (*Coefficient
+    /// storage*) and `tests/storage.rs`.
+    F16,
 }
 
 impl Storage {
@@ -206,6 +214,7 @@ impl Storage {
         match self {
             Storage::F64 => "f64",
             Storage::F32 => "f32",
+            Storage::F16 => "f16",
         }
     }
 }
