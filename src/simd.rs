@@ -49,9 +49,14 @@ impl Isa {
     fn detect() -> Isa {
         #[cfg(target_arch = "x86_64")]
         {
-            // F16C for the `f16` storage's row loads: every CPU with AVX2
-            // has it.
-            let f16c = std::arch::is_x86_feature_detected!("f16c");
+            // F16C for the `f16` storage's row loads, and the scalar bit
+            // instructions the walk and the tagged-cell index use: every CPU
+            // with AVX2 has them.
+            let f16c = std::arch::is_x86_feature_detected!("f16c")
+                && std::arch::is_x86_feature_detected!("popcnt")
+                && std::arch::is_x86_feature_detected!("bmi1")
+                && std::arch::is_x86_feature_detected!("bmi2")
+                && std::arch::is_x86_feature_detected!("lzcnt");
             if std::arch::is_x86_feature_detected!("avx512f")
                 && std::arch::is_x86_feature_detected!("avx512vl")
                 && std::arch::is_x86_feature_detected!("avx512dq")
@@ -128,7 +133,9 @@ macro_rules! with_isa {
         match $isa {
             #[cfg(target_arch = "x86_64")]
             $crate::simd::Isa::Avx512 => {
-                #[target_feature(enable = "avx512f,avx512vl,avx512dq,fma,avx2,f16c")]
+                #[target_feature(
+                    enable = "avx512f,avx512vl,avx512dq,fma,avx2,f16c,popcnt,bmi1,bmi2,lzcnt"
+                )]
                 unsafe fn run<R>(f: impl FnOnce() -> R) -> R {
                     f()
                 }
@@ -144,7 +151,7 @@ macro_rules! with_isa {
             }
             #[cfg(target_arch = "x86_64")]
             $crate::simd::Isa::Avx2 => {
-                #[target_feature(enable = "avx2,fma,f16c")]
+                #[target_feature(enable = "avx2,fma,f16c,popcnt,bmi1,bmi2,lzcnt")]
                 unsafe fn run<R>(f: impl FnOnce() -> R) -> R {
                     f()
                 }

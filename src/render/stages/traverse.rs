@@ -39,10 +39,10 @@ pub fn traverse<const S: usize, T: Coefficient>(
                     tree,
                     leaf_level: *leaf_level,
                 };
-                walk_interleaved(ctx, octree, rays, input, solve, record, c);
+                crate::with_isa!(crate::simd::Isa::current(), _L, _M => walk_interleaved(ctx, octree, rays, input, solve, record, c));
             }
             Skip::Distance(p) => {
-                walk_interleaved(ctx, DistanceCubes::new(p), rays, input, solve, record, c);
+                crate::with_isa!(crate::simd::Isa::current(), _L, _M => walk_interleaved(ctx, DistanceCubes::new(p), rays, input, solve, record, c));
             }
             Skip::Bound(b) => {
                 for &r in input {
@@ -643,6 +643,7 @@ const WALKS: usize = 2;
 /// in turn, lets the core overlap the chains; a ray that finishes hands its
 /// slot to the next one in the queue. Each ray's steps are those of a walk on
 /// its own, so the results are the same bits in any order.
+#[inline(always)]
 fn walk_interleaved<E: EmptySpace, T: Coefficient>(
     ctx: &Ctx<T>,
     space: E,
