@@ -176,6 +176,42 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
         }
     }
 
+    /// [`Ctx::clip`] from `t_min = 0` for `N` rays in lanes (origins
+    /// `o[axis][lane]`, directions `d`): the same operations in the same
+    /// order for every lane, so bitwise what each ray alone gives (tested),
+    /// with the divisions of all lanes in vector instructions.
+    #[inline(always)]
+    pub fn clip_lanes<const N: usize>(
+        &self,
+        o: &[[f64; N]; 3],
+        d: &[[f64; N]; 3],
+    ) -> [Option<(f64, f64)>; N] {
+        if self.active[0].cmpgt(self.active[1]).any() {
+            return [None; N];
+        }
+        let mut t0 = [0.0f64; N];
+        let mut t1 = [f64::INFINITY; N];
+        let mut missed = [false; N];
+        for a in 0..3 {
+            let (lo, hi) = (self.active[0][a], self.active[1][a]);
+            for l in 0..N {
+                let (o, d) = (o[a][l], d[a][l]);
+                if d == 0.0 {
+                    missed[l] |= o < lo || o > hi;
+                    continue;
+                }
+                let inv = 1.0 / d;
+                let (ta, tb) = ((lo - o) * inv, (hi - o) * inv);
+                let (ta, tb) = if ta > tb { (tb, ta) } else { (ta, tb) };
+                t0[l] = t0[l].max(ta);
+                t1[l] = t1[l].min(tb);
+            }
+        }
+        std::array::from_fn(|l| {
+            (!missed[l] && t0[l] <= t1[l] && t1[l].is_finite()).then_some((t0[l], t1[l]))
+        })
+    }
+
     /// World point → grid coordinates.
     #[inline(always)]
     pub fn to_grid(&self, p: DVec3) -> DVec3 {
@@ -241,6 +277,60 @@ mod tests {
             [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
         let set = vec![format!("render.traversal={traversal}")];
         Scene::parse(text, std::path::Path::new("test.toml"), &set).unwrap()
+    }
+
+    /// The lanes clip as [`Ctx::clip`] does, bit for bit: rays from inside
+    /// and outside the active box, along axes (zero components, inside and
+    /// outside the slab), towards and away from it, and with NaN or
+    /// infinite components; and an empty box clips everything.
+    #[test]
+    fn lanes_clip_as_each_ray_does() {
+        let sc = scene("octree");
+        let prep = Prepared::new(Arc::new(ball(24, 200.0, 0.0)), sc.surface.filter)
+            .with_accel(sc.surface.iso, Method::Bezier(2));
+        with_field!(&prep.field, f => {
+            let ctx = Ctx::new(&sc, &prep, f.as_ref());
+            let odd = [0.0, -0.0, f64::NAN, f64::INFINITY, 1e-300];
+            let mut some = 0;
+            for k in 0..4000u64 {
+                let u = |j| 2.0 * uniform(mix64(k), j) - 1.0;
+                let mut o = [[0.0; 8]; 3];
+                let mut d = [[0.0; 8]; 3];
+                for l in 0..8 {
+                    let j = 8 * l as u64;
+                    let mut ol = DVec3::splat(11.5) + 20.0 * DVec3::new(u(j), u(j + 1), u(j + 2));
+                    // Half of them aimed near the ball.
+                    let aim = DVec3::splat(11.5) + 4.0 * DVec3::new(u(j + 3), u(j + 4), u(j + 5));
+                    let mut dl = if k % 2 == 0 {
+                        (aim - ol).normalize()
+                    } else {
+                        DVec3::new(u(j + 3), u(j + 4), u(j + 5)).normalize()
+                    };
+                    if (k + l as u64).is_multiple_of(6) {
+                        dl[(k % 3) as usize] = odd[(k / 6 % 5) as usize];
+                    }
+                    if (k + l as u64).is_multiple_of(13) {
+                        ol[(k % 3) as usize] = odd[(k / 13 % 5) as usize];
+                    }
+                    for a in 0..3 {
+                        o[a][l] = ol[a];
+                        d[a][l] = dl[a];
+                    }
+                }
+                let got = ctx.clip_lanes(&o, &d);
+                for l in 0..8 {
+                    let (ol, dl) = (
+                        DVec3::new(o[0][l], o[1][l], o[2][l]),
+                        DVec3::new(d[0][l], d[1][l], d[2][l]),
+                    );
+                    let want = ctx.clip(ol, dl, 0.0);
+                    let bits = |c: Option<(f64, f64)>| c.map(|(a, b)| (a.to_bits(), b.to_bits()));
+                    assert_eq!(bits(got[l]), bits(want), "{k}/{l}: {ol:?} {dl:?}");
+                    some += want.is_some() as usize;
+                }
+            }
+            assert!(some > 12_000 && some < 30_000, "{some}");
+        });
     }
 
     /// Rays from every side entering the active box through a face find the

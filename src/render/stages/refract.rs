@@ -16,6 +16,7 @@ use crate::classify::CurvatureBounds;
 use crate::classify::curvature;
 use crate::filter::coeffs::Coefficient;
 use crate::render::stats::Counters;
+use crate::scene::Traversal;
 use crate::simd::{Isa, prefetch};
 
 /// Result of bending a unit direction `d` at a surface with outward normal
@@ -127,6 +128,7 @@ fn refract_runs<const S: usize, const L: usize, T: Coefficient>(
             }
         }
         let bent = bend_lanes(&at, ctx.inv_spacing, eps_vox);
+        let pieces = pieces_lanes(ctx, &at.point, &bent);
         for (l, &r) in run.iter().enumerate() {
             let i = r as usize;
             // The cell whose solve found the crossing.
@@ -155,9 +157,14 @@ fn refract_runs<const S: usize, const L: usize, T: Coefficient>(
                 continue;
             }
             let eps = bent.eps[l];
-            match ctx.clip(p, new_dir, 0.0) {
+            match pieces.clip[l] {
                 Some((_, t1)) if t1 > eps => {
-                    place::<S, _>(ctx, rays, i, (eps, eps), t1, c);
+                    if ctx.traversal() == Traversal::Step {
+                        // The march also samples the field where it starts.
+                        place::<S, _>(ctx, rays, i, (eps, eps), t1, c);
+                    } else {
+                        pieces.place(rays, i, l, t1);
+                    }
                     let grad = [0, 1, 2].map(|a| at.grad[a][l]);
                     if let Some(bounds) = ctx.curvature
                         && at.unclamped[l]
@@ -282,6 +289,80 @@ fn bend_lanes(at: &Crossings, inv_spacing: DVec3, eps_vox: f64) -> Bent {
         bent.eps[l] = eps_vox / ((gd[0] * gd[0]) + (gd[1] * gd[1]) + (gd[2] * gd[2])).sqrt();
     }
     bent
+}
+
+/// The new pieces of a run of bent rays, computed in vector lanes: where
+/// each leaves the active box ([`Ctx::clip`]), and what [`place`] would set
+/// for a piece starting at the restart offset — its direction in cell
+/// coordinates with reciprocal, and the cell there. The same operations on
+/// the same values as those functions, so the same bits (tested), with the
+/// run's divisions and floors in vector instructions instead of six scalar
+/// divisions per ray.
+///
+/// [`place`]: super::place
+struct Pieces {
+    clip: [Option<(f64, f64)>; RUN],
+    cell_org: [[f64; RUN]; 3],
+    cell_dir: [[f64; RUN]; 3],
+    cell_inv: [[f64; RUN]; 3],
+    cell: [[i64; RUN]; 3],
+    /// The restart offset (grid units over the direction's length).
+    eps: [f64; RUN],
+}
+
+#[inline(always)]
+fn pieces_lanes<T: Coefficient>(ctx: &Ctx<T>, point: &[DVec3; RUN], bent: &Bent) -> Pieces {
+    let mut o = [[0.0; RUN]; 3];
+    for l in 0..RUN {
+        for a in 0..3 {
+            o[a][l] = point[l][a];
+        }
+    }
+    let d = &bent.dir;
+    let mut p = Pieces {
+        clip: ctx.clip_lanes(&o, d),
+        cell_org: [[0.0; RUN]; 3],
+        cell_dir: [[0.0; RUN]; 3],
+        cell_inv: [[0.0; RUN]; 3],
+        cell: [[0; RUN]; 3],
+        eps: bent.eps,
+    };
+    let inv_spacing = ctx.inv_spacing;
+    for a in 0..3 {
+        for l in 0..RUN {
+            let og = o[a][l] * inv_spacing[a];
+            let dg = d[a][l] * inv_spacing[a];
+            p.cell_org[a][l] = og + ctx.lattice.offset;
+            p.cell_dir[a][l] = dg;
+            p.cell_inv[a][l] = if dg != 0.0 { 1.0 / dg } else { 0.0 };
+            // `move_walk` at the restart offset: `to_grid(o + eps·d)`.
+            let at = (o[a][l] + p.eps[l] * d[a][l]) * inv_spacing[a];
+            p.cell[a][l] = ctx.lattice.cell_of(a, at);
+        }
+    }
+    p
+}
+
+impl Pieces {
+    /// [`place`] for ray `i` (lane `l`): its piece and walk from the
+    /// restart offset to `t_end`, for the cell traversals (the march also
+    /// samples the field there, so it takes `place` itself).
+    ///
+    /// [`place`]: super::place
+    #[inline(always)]
+    fn place(&self, rays: &mut Rays, i: usize, l: usize, t_end: f64) {
+        for a in 0..3 {
+            rays.cell_org[a][i] = self.cell_org[a][l];
+            rays.cell_dir[a][i] = self.cell_dir[a][l];
+            rays.cell_inv[a][i] = self.cell_inv[a][l];
+        }
+        let eps = self.eps[l];
+        rays.t_start[i] = eps;
+        rays.t_end[i] = t_end;
+        rays.advance[i] = false;
+        rays.t[i] = eps;
+        rays.set_cell(i, [self.cell[0][l], self.cell[1][l], self.cell[2][l]]);
+    }
 }
 
 /// A ray just placed a hair past a crossing, waiting for the proof that the
