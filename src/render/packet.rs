@@ -49,11 +49,12 @@ pub struct Rays<'a> {
     pub seg_end: BVec<'a, f64>,
     /// Field minus iso at `t` and `seg_end` (step traversal's bracket).
     pub seg_g: [BVec<'a, f64>; 2],
-    /// The current piece in knot-cell coordinates (grid + lattice offset):
-    /// origin, direction and the direction's reciprocal (0 where it is 0),
-    /// set once per piece so the cell walk never divides.
-    pub cell_org: [BVec<'a, f64>; 3],
-    pub cell_dir: [BVec<'a, f64>; 3],
+    /// The reciprocal of the current piece's direction in knot-cell
+    /// coordinates (0 where it is 0), set once per piece so the cell walk
+    /// never divides. The piece's origin and direction in cell coordinates
+    /// are not stored: recomputed from `org` and `dir` (two operations per
+    /// axis, bitwise what was stored), the packet is a quarter smaller and
+    /// stays in the L1 cache better.
     pub cell_inv: [BVec<'a, f64>; 3],
     /// Current knot cell (cell traversal).
     pub cell: [BVec<'a, i32>; 3],
@@ -92,8 +93,6 @@ impl<'a> Rays<'a> {
             t_end: f(),
             seg_end: f(),
             seg_g: [f(), f()],
-            cell_org: [f(), f(), f()],
-            cell_dir: [f(), f(), f()],
             cell_inv: [f(), f(), f()],
             cell: [
                 BVec::with_capacity_in(n, bump),
@@ -172,8 +171,6 @@ impl<'a> Rays<'a> {
         let n = self.len();
         for a in 0..3 {
             self.cell[a].resize(n, 0);
-            self.cell_org[a].resize(n, 0.0);
-            self.cell_dir[a].resize(n, 0.0);
             self.cell_inv[a].resize(n, 0.0);
         }
         let [g0, g1] = &mut self.seg_g;

@@ -40,11 +40,8 @@ pub(crate) fn place<const S: usize, T: Coefficient>(
     t_end: f64,
     c: &mut Counters,
 ) {
-    let og = ctx.to_grid(rays.origin(i));
     let dg = ctx.to_grid(rays.direction(i));
     for a in 0..3 {
-        rays.cell_org[a][i] = og[a] + ctx.lattice.offset;
-        rays.cell_dir[a][i] = dg[a];
         rays.cell_inv[a][i] = if dg[a] != 0.0 { 1.0 / dg[a] } else { 0.0 };
     }
     rays.t_start[i] = t;

@@ -293,8 +293,8 @@ fn bend_lanes(at: &Crossings, inv_spacing: DVec3, eps_vox: f64) -> Bent {
 
 /// The new pieces of a run of bent rays, computed in vector lanes: where
 /// each leaves the active box ([`Ctx::clip`]), and what [`place`] would set
-/// for a piece starting at the restart offset — its direction in cell
-/// coordinates with reciprocal, and the cell there. The same operations on
+/// for a piece starting at the restart offset — the reciprocal of its
+/// direction in cell coordinates, and the cell there. The same operations on
 /// the same values as those functions, so the same bits (tested), with the
 /// run's divisions and floors in vector instructions instead of six scalar
 /// divisions per ray.
@@ -302,8 +302,6 @@ fn bend_lanes(at: &Crossings, inv_spacing: DVec3, eps_vox: f64) -> Bent {
 /// [`place`]: super::place
 struct Pieces {
     clip: [Option<(f64, f64)>; RUN],
-    cell_org: [[f64; RUN]; 3],
-    cell_dir: [[f64; RUN]; 3],
     cell_inv: [[f64; RUN]; 3],
     cell: [[i64; RUN]; 3],
     /// The restart offset (grid units over the direction's length).
@@ -321,8 +319,6 @@ fn pieces_lanes<T: Coefficient>(ctx: &Ctx<T>, point: &[DVec3; RUN], bent: &Bent)
     let d = &bent.dir;
     let mut p = Pieces {
         clip: ctx.clip_lanes(&o, d),
-        cell_org: [[0.0; RUN]; 3],
-        cell_dir: [[0.0; RUN]; 3],
         cell_inv: [[0.0; RUN]; 3],
         cell: [[0; RUN]; 3],
         eps: bent.eps,
@@ -330,10 +326,7 @@ fn pieces_lanes<T: Coefficient>(ctx: &Ctx<T>, point: &[DVec3; RUN], bent: &Bent)
     let inv_spacing = ctx.inv_spacing;
     for a in 0..3 {
         for l in 0..RUN {
-            let og = o[a][l] * inv_spacing[a];
             let dg = d[a][l] * inv_spacing[a];
-            p.cell_org[a][l] = og + ctx.lattice.offset;
-            p.cell_dir[a][l] = dg;
             p.cell_inv[a][l] = if dg != 0.0 { 1.0 / dg } else { 0.0 };
             // `move_walk` at the restart offset: `to_grid(o + eps·d)`.
             let at = (o[a][l] + p.eps[l] * d[a][l]) * inv_spacing[a];
@@ -352,8 +345,6 @@ impl Pieces {
     #[inline(always)]
     fn place(&self, rays: &mut Rays, i: usize, l: usize, t_end: f64) {
         for a in 0..3 {
-            rays.cell_org[a][i] = self.cell_org[a][l];
-            rays.cell_dir[a][i] = self.cell_dir[a][l];
             rays.cell_inv[a][i] = self.cell_inv[a][l];
         }
         let eps = self.eps[l];
@@ -438,7 +429,7 @@ impl ClearCheck {
         margin: f64,
     ) -> Option<Clearing> {
         let i = self.i;
-        let ray = cell_ray(rays, i);
+        let ray = cell_ray(ctx, rays, i);
         let slope: f64 = (0..3).map(|a| self.grad[a] * ray.du[a]).sum();
         // Inside the object means `f > iso`: leaving the crossing into it,
         // `f` must grow. (An overflowed gradient proves nothing.)

@@ -363,14 +363,23 @@ pub(crate) fn in_range<T: Coefficient>(ctx: &Ctx<T>, c: [i64; 3]) -> bool {
     (c[0] as u64) < n[0] as u64 && (c[1] as u64) < n[1] as u64 && (c[2] as u64) < n[2] as u64
 }
 
-/// Ray `i` in cell coordinates, from the packet's SoA columns.
+/// Ray `i`'s current piece in cell coordinates (grid + lattice offset),
+/// from its world origin and direction as [`super::place`] converts them,
+/// and the stored reciprocal.
 #[inline(always)]
-pub(crate) fn cell_ray(rays: &Rays, i: usize) -> CellRay {
-    CellRay {
-        ou: std::array::from_fn(|a| rays.cell_org[a][i]),
-        du: std::array::from_fn(|a| rays.cell_dir[a][i]),
-        inv: std::array::from_fn(|a| rays.cell_inv[a][i]),
+pub(crate) fn cell_ray<T: Coefficient>(ctx: &Ctx<T>, rays: &Rays, i: usize) -> CellRay {
+    let (s, off) = (ctx.inv_spacing, ctx.lattice.offset);
+    let mut ray = CellRay {
+        ou: [0.0; 3],
+        du: [0.0; 3],
+        inv: [0.0; 3],
+    };
+    for a in 0..3 {
+        ray.ou[a] = rays.org[a][i] * s[a] + off;
+        ray.du[a] = rays.dir[a][i] * s[a];
+        ray.inv[a] = rays.cell_inv[a][i];
     }
+    ray
 }
 
 /// Cell walk over the bound alone (no classification): the incremental DDA,
@@ -386,7 +395,7 @@ fn walk_bound<T: Coefficient>(
     c: &mut Counters,
 ) {
     let i = r as usize;
-    let ray = cell_ray(rays, i);
+    let ray = cell_ray(ctx, rays, i);
     let mut w = Dda::new(&ray, rays.cell_of(i), rays.t[i]);
     let t_end = rays.t_end[i];
     if rays.advance[i] {
@@ -579,9 +588,14 @@ enum Step {
 
 impl<L: Copy> Walk<L> {
     #[inline(always)]
-    fn start<E: EmptySpace<Local = L>>(space: &E, rays: &mut Rays, r: u32) -> Walk<L> {
+    fn start<E: EmptySpace<Local = L>, T: Coefficient>(
+        ctx: &Ctx<T>,
+        space: &E,
+        rays: &mut Rays,
+        r: u32,
+    ) -> Walk<L> {
         let i = r as usize;
-        let ray = cell_ray(rays, i);
+        let ray = cell_ray(ctx, rays, i);
         let mut cell = rays.cell_of(i);
         let mut t = rays.t[i];
         if rays.advance[i] {
@@ -655,7 +669,7 @@ fn walk_interleaved<E: EmptySpace, T: Coefficient>(
 ) {
     let mut pending = input.iter();
     let mut walks: [Option<Walk<E::Local>>; WALKS] =
-        std::array::from_fn(|_| pending.next().map(|&r| Walk::start(&space, rays, r)));
+        std::array::from_fn(|_| pending.next().map(|&r| Walk::start(ctx, &space, rays, r)));
     let mut live = walks.iter().filter(|w| w.is_some()).count();
     while live > 0 {
         for slot in walks.iter_mut() {
@@ -674,7 +688,7 @@ fn walk_interleaved<E: EmptySpace, T: Coefficient>(
                     record.push(w.r);
                 }
             }
-            *slot = pending.next().map(|&r| Walk::start(&space, rays, r));
+            *slot = pending.next().map(|&r| Walk::start(ctx, &space, rays, r));
             if slot.is_none() {
                 live -= 1;
             }
