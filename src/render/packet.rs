@@ -47,7 +47,8 @@ pub struct Rays<'a> {
     pub t_end: BVec<'a, f64>,
     /// End of the segment handed to the solve stage.
     pub seg_end: BVec<'a, f64>,
-    /// Field minus iso at `t` and `seg_end` (step traversal's bracket).
+    /// Field minus iso at `t` and `seg_end` (step traversal's bracket);
+    /// empty for the cell traversals, which never read them.
     pub seg_g: [BVec<'a, f64>; 2],
     /// The reciprocal of the current piece's direction in knot-cell
     /// coordinates (0 where it is 0), set once per piece so the cell walk
@@ -70,6 +71,8 @@ pub struct Rays<'a> {
     pub side_known: BVec<'a, bool>,
     pub events: BVec<'a, u32>,
     pub fate: BVec<'a, Fate>,
+    /// Whether [`Rays::seg_g`] is kept.
+    marches: bool,
 }
 
 impl<'a> Rays<'a> {
@@ -78,9 +81,13 @@ impl<'a> Rays<'a> {
     /// 256 rays (a 16×16 tile), `f64` columns of exactly 2 KiB put ray `i` of
     /// every column in the same two sets of the L1 cache, and a stage
     /// touching a dozen columns per ray evicted its own lines.
-    pub fn with_capacity_in(n: usize, bump: &'a Bump) -> Rays<'a> {
+    ///
+    /// `marches` (step traversal) gives the rays the sampled field at their
+    /// bracket's ends ([`Rays::seg_g`]).
+    pub fn with_capacity_in(n: usize, marches: bool, bump: &'a Bump) -> Rays<'a> {
         let n = n + 64 / std::mem::size_of::<f64>();
         let f = || BVec::with_capacity_in(n, bump);
+        let g = || BVec::with_capacity_in(if marches { n } else { 0 }, bump);
         Rays {
             pixel: BVec::with_capacity_in(n, bump),
             slot: BVec::with_capacity_in(n, bump),
@@ -92,7 +99,8 @@ impl<'a> Rays<'a> {
             t_start: f(),
             t_end: f(),
             seg_end: f(),
-            seg_g: [f(), f()],
+            seg_g: [g(), g()],
+            marches,
             cell_inv: [f(), f(), f()],
             cell: [
                 BVec::with_capacity_in(n, bump),
@@ -173,16 +181,18 @@ impl<'a> Rays<'a> {
             self.cell[a].resize(n, 0);
             self.cell_inv[a].resize(n, 0.0);
         }
-        let [g0, g1] = &mut self.seg_g;
         for col in [
             &mut self.t,
             &mut self.t_start,
             &mut self.t_end,
             &mut self.seg_end,
-            g0,
-            g1,
         ] {
             col.resize(n, 0.0);
+        }
+        if self.marches {
+            for col in &mut self.seg_g {
+                col.resize(n, 0.0);
+            }
         }
         self.advance.resize(n, false);
         self.inside.resize(n, false);

@@ -193,7 +193,8 @@ pub fn render_tile<const S: usize, T: Coefficient>(
     };
     let c = &mut counters;
     let n = out.region.pixels() * generate::rays_per_pixel(sampling);
-    let mut rays = Rays::with_capacity_in(n, bump);
+    let marches = ctx.traversal() == crate::scene::Traversal::Step;
+    let mut rays = Rays::with_capacity_in(n, marches, bump);
     let mut primary = BVec::with_capacity_in(n, bump);
     let mut traverse_q = BVec::with_capacity_in(n, bump);
     let mut solve_q = BVec::with_capacity_in(n, bump);

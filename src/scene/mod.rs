@@ -37,8 +37,8 @@ const MAX_IMAGE_PIXELS: u64 = 1 << 28;
 /// (about 27 B), rounded up.
 pub const FRAME_BYTES_PER_PIXEL: u64 = 96;
 /// Bytes of tile scratch per ray: the structure-of-arrays packet (153 B:
-/// 17 `f64`, 6 `u32`/`i32`/`f32` and 5 one-byte columns) and its five
-/// stage queues (20 B), rounded up.
+/// 17 `f64` columns, two of them for step traversal only, 6 of 4 bytes and
+/// 5 of one) and its five stage queues (20 B), rounded up.
 pub const TILE_BYTES_PER_RAY: u64 = 180;
 
 /// Smallest `step` of step traversal, in voxels: bounds the samples per ray.
