@@ -180,16 +180,17 @@ macro_rules! with_isa {
 /// then over z into three accumulators (value/x-derivative, y-derivative,
 /// z-derivative), and four dot products of 4 finish it. Row `(j, k)` of the neighbourhood is
 /// `nb[j·sy + k·sz ..][..4]`; `w`/`d` are the weights and derivative
-/// weights per axis.
+/// weights per axis. Rows of `f32` or `f16` coefficients are widened to
+/// `f64` as they are loaded ([`Row4`]), so every storage runs the same sums.
 ///
 /// # Safety
-/// The CPU must have AVX2 and FMA ([`Isa::Avx2`] or better), and `nb` must
-/// hold `3·(sy + sz) + 4` values.
+/// The CPU must have AVX2, FMA and F16C ([`Isa::Avx2`] or better), and `nb`
+/// must hold `3·(sy + sz) + 4` values.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx2,fma")]
+#[target_feature(enable = "avx2,fma,f16c")]
 #[inline]
-pub unsafe fn cubic_value_grad(
-    nb: &[f64],
+pub unsafe fn cubic_value_grad<T: Row4>(
+    nb: &[T],
     sy: usize,
     sz: usize,
     w: &[[f64; 4]; 3],
@@ -209,7 +210,7 @@ pub unsafe fn cubic_value_grad(
         let (mut pk, mut qk) = (_mm256_setzero_pd(), _mm256_setzero_pd());
         for j in 0..4 {
             // SAFETY: the caller guarantees the row is inside `nb`.
-            let c = unsafe { _mm256_loadu_pd(nb.as_ptr().add(j * sy + k * sz)) };
+            let c = unsafe { T::load4(nb.as_ptr().add(j * sy + k * sz)) };
             pk = _mm256_fmadd_pd(wy[j], c, pk);
             qk = _mm256_fmadd_pd(dy[j], c, qk);
         }
@@ -242,13 +243,13 @@ pub unsafe fn cubic_value_grad(
 /// at a time.)
 ///
 /// # Safety
-/// The CPU must have AVX-512F and FMA ([`Isa::Avx512`]), and every row
+/// The CPU must have AVX-512F, FMA and F16C ([`Isa::Avx512`]), and every row
 /// `base[l] + j·sy + k·sz .. + 4` (`j, k < 4`) must lie in `data`.
 #[cfg(target_arch = "x86_64")]
-#[target_feature(enable = "avx512f,fma")]
+#[target_feature(enable = "avx512f,fma,f16c")]
 #[inline]
-pub unsafe fn cubic_value_grad_x8(
-    data: &[f64],
+pub unsafe fn cubic_value_grad_x8<T: Row4>(
+    data: &[T],
     base: &[usize; 8],
     (sy, sz): (usize, usize),
     t: &[[f64; 8]; 3],
@@ -280,7 +281,7 @@ pub unsafe fn cubic_value_grad_x8(
         for j in 0..4 {
             // SAFETY: rows in bounds (caller); AVX-512 (caller).
             let c: [__m512d; 4] = unsafe {
-                std::mem::transmute(rows4x8::<f64>(
+                std::mem::transmute(rows4x8::<T>(
                     data.as_ptr().wrapping_add(j * sy + k * sz),
                     base.as_ptr(),
                 ))

@@ -255,16 +255,14 @@ impl<T: Coefficient> Field<T> {
     }
 
     /// [`Field::value_grad_in`], through the AVX2/FMA cubic kernel where the
-    /// support is 4, the storage `f64` and the CPU has them: what a stage
-    /// that needs one gradient at a time (refraction) calls.
+    /// support is 4 and the CPU has them (any storage): what a stage that
+    /// needs one gradient at a time calls.
     #[inline(always)]
     pub fn value_grad_fast<const S: usize>(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
         #[cfg(target_arch = "x86_64")]
-        if S == 4
-            && crate::simd::Isa::current() != crate::simd::Isa::Portable
-            && T::as_f64_slice(self.coeffs.data()).is_some()
-        {
-            // SAFETY: support 4, f64 storage and AVX2/FMA checked above.
+        if S == 4 && crate::simd::Isa::current() != crate::simd::Isa::Portable {
+            // SAFETY: support 4 and AVX2/FMA/F16C (every non-portable
+            // level, `Isa::detect`) checked above.
             return unsafe { self.cubic_value_grad_in(p) };
         }
         self.value_grad_in::<S>(p)
@@ -339,12 +337,13 @@ impl<T: Coefficient> Field<T> {
     }
 
     /// [`Field::value_grad_in`] for cubic kernels (support 4) with AVX2 and
-    /// FMA: one vector per neighbourhood row ([`crate::simd::cubic_value_grad`]).
+    /// FMA: one vector per neighbourhood row ([`crate::simd::cubic_value_grad`]),
+    /// `f32` and `f16` rows widened as they load.
     ///
     /// # Safety
-    /// The support must be 4 and the CPU must have AVX2 and FMA.
+    /// The support must be 4 and the CPU must have AVX2, FMA and F16C.
     #[cfg(target_arch = "x86_64")]
-    #[target_feature(enable = "avx2,fma")]
+    #[target_feature(enable = "avx2,fma,f16c")]
     #[inline]
     pub unsafe fn cubic_value_grad_in(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
         let mut w = [[0.0; 4]; 3];
@@ -356,23 +355,21 @@ impl<T: Coefficient> Field<T> {
             (w[a], d[a]) = self.kernel.weights_and_derivs::<4>(t);
         }
         let (nb, sy, sz) = self.neighbourhood::<4>(self.coeffs.offset(k[0], k[1], k[2]));
-        match T::as_f64_slice(nb) {
-            // SAFETY: a `neighbourhood` holds every row; AVX2/FMA per caller.
-            Some(nb) => unsafe { crate::simd::cubic_value_grad(nb, sy, sz, &w, &d) },
-            None => self.value_grad_in::<4>(p),
-        }
+        // SAFETY: a `neighbourhood` holds every row; AVX2/FMA/F16C per caller.
+        unsafe { crate::simd::cubic_value_grad(nb, sy, sz, &w, &d) }
     }
 
     /// [`Field::value_grad_fast`] at `L` in-domain points `q[a][l]`, bitwise
-    /// its result point by point. For cubic kernels over `f64` coefficients
+    /// its result point by point. For cubic kernels (any storage)
     /// under AVX-512 (`L == 8`) the points are located one by one, then
     /// weighted and contracted in vector lanes together by
     /// [`crate::simd::cubic_value_grad_x8`]: one point at a time, the
     /// weights and the final horizontal sums were a chain of scalar work per
-    /// crossing (single-thread sphere refract stage 32 → 30 ms).
+    /// crossing (single-thread sphere refract stage 32 → 30 ms). `f32` and
+    /// `f16` rows are widened as they load, as in the scalar kernel.
     ///
-    /// Every other filter, storage or vector width takes
-    /// [`Field::value_grad_fast`] lane by lane.
+    /// Every other filter or vector width takes [`Field::value_grad_fast`]
+    /// lane by lane.
     ///
     /// # Safety
     /// `L` must be bound by [`crate::with_isa!`] for the running instruction
@@ -383,7 +380,8 @@ impl<T: Coefficient> Field<T> {
         q: &[[f64; L]; 3],
     ) -> ([f64; L], [[f64; L]; 3]) {
         #[cfg(target_arch = "x86_64")]
-        if let (Some(data), true) = (T::as_f64_slice(self.coeffs.data()), S == 4 && L == 8) {
+        if S == 4 && L == 8 {
+            let data = self.coeffs.data();
             let mut t = [[0.0f64; 8]; 3];
             let mut cell = [[0isize; 8]; 3];
             for a in 0..3 {
@@ -670,8 +668,8 @@ mod tests {
 
     /// The refraction stage's lane gradients are the one-point ones bit for
     /// bit, whatever the filter, storage and vector width (every width the
-    /// CPU runs; under AVX-512 cubic filters over `f64` take the lane
-    /// kernel), at points all over the domain, its faces and corners
+    /// CPU runs; under AVX-512 cubic filters take the lane kernel, over
+    /// every storage), at points all over the domain, its faces and corners
     /// included.
     #[test]
     fn lane_gradients_are_the_single_point_ones_bitwise() {
@@ -692,17 +690,24 @@ mod tests {
             let kind = FilterKind::parse(name, 0.0).unwrap();
             let f64_field = Field::new(&vol, kind);
             let f32_field = Field::<f32>::new_in(&vol, kind);
+            let f16_field = Field::<half::f16>::new_in(&vol, kind);
             let bits = |(v, g): (f64, [f64; 3])| (v.to_bits(), g.map(f64::to_bits));
             for isa in crate::simd::Isa::available() {
                 crate::with_support!(f64_field.kernel().support(), S => {
                     let lanes = (
                         lanes_of::<S, _>(isa, &f64_field, &points),
                         lanes_of::<S, _>(isa, &f32_field, &points),
+                        lanes_of::<S, _>(isa, &f16_field, &points),
                     );
                     for (k, p) in points.iter().enumerate() {
-                        let want = (f64_field.value_grad_fast::<S>(*p), f32_field.value_grad_fast::<S>(*p));
+                        let want = (
+                            f64_field.value_grad_fast::<S>(*p),
+                            f32_field.value_grad_fast::<S>(*p),
+                            f16_field.value_grad_fast::<S>(*p),
+                        );
                         assert_eq!(bits(lanes.0[k]), bits(want.0), "{name} f64 {isa:?} at {p:?}");
                         assert_eq!(bits(lanes.1[k]), bits(want.1), "{name} f32 {isa:?} at {p:?}");
+                        assert_eq!(bits(lanes.2[k]), bits(want.2), "{name} f16 {isa:?} at {p:?}");
                     }
                 });
             }
