@@ -164,14 +164,29 @@ pub enum AnyField {
 }
 
 impl AnyField {
-    /// Prefilters `vol` for `filter` into `storage`; `f16` refuses
-    /// coefficients beyond its range.
-    pub fn new(vol: &Volume, filter: FilterKind, storage: Storage) -> Result<AnyField, SceneError> {
+    /// Prefilters `vol` for `filter` into `storage`. `f16` stores the
+    /// coefficients less `centre` (the iso-value it will render; any other
+    /// iso renders correctly too, only less precisely — see [`Field`]) and
+    /// refuses them when they lie beyond its range.
+    pub fn new(
+        vol: &Volume,
+        filter: FilterKind,
+        storage: Storage,
+        centre: f64,
+    ) -> Result<AnyField, SceneError> {
         Ok(match storage {
             Storage::F64 => AnyField::F64(Arc::new(Field::new(vol, filter))),
             Storage::F32 => AnyField::F32(Arc::new(Field::<f32>::new_in(vol, filter))),
-            Storage::F16 => AnyField::F16(Arc::new(f16_field(Field::<f32>::new_in(vol, filter))?)),
+            Storage::F16 => AnyField::F16(Arc::new(f16_field(
+                Field::<f32>::new_in(vol, filter),
+                centre,
+            )?)),
         })
+    }
+
+    /// What the stored coefficients are relative to ([`Field::offset`]).
+    pub fn offset(&self) -> f64 {
+        with_field!(self, f => f.offset())
     }
 
     pub fn storage(&self) -> Storage {
@@ -213,20 +228,26 @@ impl AnyField {
     }
 }
 
-/// `f` rounded once to `f16`, or an error naming the largest coefficient
-/// when some lie beyond `f16`'s range (they would become infinite).
-fn f16_field(f: Field<f32>) -> Result<Field<half::f16>, SceneError> {
-    let max = f.max_abs_coeff();
+/// `f` less `centre`, rounded once to `f16` (so the values near the surface
+/// at iso `centre` are small, where `f16` is precise), or an error naming the
+/// largest when some lie beyond `f16`'s range (they would become
+/// infinite).
+fn f16_field(f: Field<f32>, centre: f64) -> Result<Field<half::f16>, SceneError> {
+    // NaN-propagating: a NaN coefficient or centre is refused too.
+    let max = f.coeffs().data().iter().fold(0.0f64, |m, c| {
+        let d = (c.to_f64() - centre).abs();
+        if d > m || d.is_nan() { d } else { m }
+    });
     if max.is_nan() || max > half::f16::MAX.to_f64() {
         return Err(SceneError::Storage {
             storage: Storage::F16.name(),
             msg: format!(
-                "the largest prefiltered coefficient, {max:.6e}, is beyond f16's range (±65504); \
-                 use \"f32\" or \"f64\""
+                "the largest prefiltered coefficient less the iso-value {centre}, {max:.6e}, \
+                 is beyond f16's range (±65504); use \"f32\" or \"f64\""
             ),
         });
     }
-    Ok(Field::from_coeffs(f.kind(), f.coeffs().convert()))
+    Ok(Field::from_coeffs(f.kind(), f.coeffs().convert_shifted(centre)).with_offset(centre))
 }
 
 /// Inputs of one frame.
@@ -241,17 +262,19 @@ pub struct Prepared {
 impl Prepared {
     /// Prefilters `volume` for `filter`, without acceleration structures.
     pub fn new(volume: Arc<Volume>, filter: FilterKind) -> Prepared {
-        Prepared::new_in(volume, filter, Storage::F64).expect("f64 holds every coefficient")
+        Prepared::new_in(volume, filter, Storage::F64, 0.0).expect("f64 holds every coefficient")
     }
 
-    /// [`Prepared::new`] with coefficients stored as `storage`.
+    /// [`Prepared::new`] with coefficients stored as `storage` (`f16`
+    /// centred on `centre`, see [`AnyField::new`]).
     pub fn new_in(
         volume: Arc<Volume>,
         filter: FilterKind,
         storage: Storage,
+        centre: f64,
     ) -> Result<Prepared, SceneError> {
         let start = Instant::now();
-        let field = AnyField::new(&volume, filter, storage)?;
+        let field = AnyField::new(&volume, filter, storage, centre)?;
         Ok(Prepared {
             volume,
             field,
@@ -381,7 +404,11 @@ impl Cache {
     pub fn field_key(scene: &Scene) -> (String, String) {
         (
             Cache::volume_key(scene),
-            field_name(scene.surface.filter, scene.render.coefficients),
+            field_name(
+                scene.surface.filter,
+                scene.render.coefficients,
+                scene.surface.iso,
+            ),
         )
     }
 
@@ -428,7 +455,8 @@ impl Cache {
         };
         let filter = scene.surface.filter;
         let storage = scene.render.coefficients;
-        let fkey = (vkey.clone(), field_name(filter, storage));
+        let centre = scene.surface.iso;
+        let fkey = (vkey.clone(), field_name(filter, storage, centre));
         let field = match self.fields.get(&fkey) {
             Some(f) => f.clone(),
             None => {
@@ -436,11 +464,11 @@ impl Cache {
                 let disk = self.disk_path(hash, &format!("{}.coef", fkey.1));
                 let loaded = disk
                     .as_deref()
-                    .and_then(|p| self.read_field(p, filter, storage, &volume));
+                    .and_then(|p| self.read_field(p, filter, storage, centre, &volume));
                 let f = match loaded {
                     Some(f) => f,
                     None => {
-                        let f = AnyField::new(&volume, filter, storage)?;
+                        let f = AnyField::new(&volume, filter, storage, centre)?;
                         if let Some(p) = &disk {
                             self.write_or_warn(p, |w| with_field!(&f, f => write_field(w, f)));
                         }
@@ -516,6 +544,7 @@ impl Cache {
         path: &Path,
         filter: FilterKind,
         storage: Storage,
+        centre: f64,
         vol: &Volume,
     ) -> Option<AnyField> {
         if !path.exists() {
@@ -528,9 +557,9 @@ impl Cache {
             Storage::F32 => {
                 read_field(path, filter, vol.dims()).map(|f| AnyField::F32(Arc::new(f)))
             }
-            Storage::F16 => {
-                read_field(path, filter, vol.dims()).map(|f| AnyField::F16(Arc::new(f)))
-            }
+            // Stored less `centre` (the file's name says which).
+            Storage::F16 => read_field(path, filter, vol.dims())
+                .map(|f: Field<half::f16>| AnyField::F16(Arc::new(f.with_offset(centre)))),
         };
         match read {
             Ok(f) => Some(f),
@@ -568,10 +597,17 @@ fn write_u64s(w: &mut dyn Write, v: &[u64]) -> std::io::Result<()> {
 }
 
 /// A field's name in cache keys and files: the filter's, and the storage
-/// unless it is `f64` (so `f64` cache files keep their names).
-fn field_name(filter: FilterKind, storage: Storage) -> String {
+/// unless it is `f64` (so `f64` cache files keep their names); for `f16`
+/// also the iso-value its coefficients are centred on.
+fn field_name(filter: FilterKind, storage: Storage, centre: f64) -> String {
     match storage {
         Storage::F64 => filter.cache_key(),
+        Storage::F16 => format!(
+            "{}-{}-{:016x}",
+            filter.cache_key(),
+            storage.name(),
+            centre.to_bits()
+        ),
         s => format!("{}-{}", filter.cache_key(), s.name()),
     }
 }

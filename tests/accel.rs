@@ -117,7 +117,13 @@ fn hits_agree(scene: &Scene, vol: Arc<Volume>, variants: &[&[&str]]) {
     let storage = scene.render.coefficients;
     let base = render::render(
         scene,
-        &Prepared::new_in(vol.clone(), scene.surface.filter, storage).unwrap(),
+        &Prepared::new_in(
+            vol.clone(),
+            scene.surface.filter,
+            storage,
+            scene.surface.iso,
+        )
+        .unwrap(),
         None,
     );
     assert_eq!(base.stats.counters.undefined, 0);
@@ -133,7 +139,7 @@ fn hits_agree(scene: &Scene, vol: Arc<Volume>, variants: &[&[&str]]) {
         s.render = parsed.render;
         let method = s.render.classify.unwrap();
         assert_eq!(s.render.coefficients, storage, "variants keep the storage");
-        let prep = Prepared::new_in(vol.clone(), s.surface.filter, storage)
+        let prep = Prepared::new_in(vol.clone(), s.surface.filter, storage, s.surface.iso)
             .unwrap()
             .with_accel(s.surface.iso, method);
         let f = render::render(&s, &prep, None);
@@ -239,9 +245,14 @@ fn with_and_without(
     off: impl Fn(&mut Scene),
 ) -> (render::Frame, render::Frame) {
     let method = scene.render.classify.unwrap();
-    let prep = Prepared::new_in(vol, scene.surface.filter, scene.render.coefficients)
-        .unwrap()
-        .with_accel(scene.surface.iso, method);
+    let prep = Prepared::new_in(
+        vol,
+        scene.surface.filter,
+        scene.render.coefficients,
+        scene.surface.iso,
+    )
+    .unwrap()
+    .with_accel(scene.surface.iso, method);
     let mut other = scene.clone();
     off(&mut other);
     (

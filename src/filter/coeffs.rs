@@ -204,10 +204,16 @@ impl<T: Coefficient> Coeffs<T> {
 
     /// The same grid in another storage, each value converted.
     pub fn convert<U: Coefficient>(&self) -> Coeffs<U> {
+        self.convert_shifted(0.0)
+    }
+
+    /// The grid less `shift` in another storage: each value `v` becomes
+    /// `v - shift` (in `f64`), rounded once to `U`.
+    pub fn convert_shifted<U: Coefficient>(&self, shift: f64) -> Coeffs<U> {
         let mut data = vec![U::default(); self.data.len()];
         crate::heap::advise_huge_pages(&mut data);
         for (d, v) in data.iter_mut().zip(&self.data) {
-            *d = U::from_f64(v.to_f64());
+            *d = U::from_f64(v.to_f64() - shift);
         }
         Coeffs {
             dims: self.dims,

@@ -54,6 +54,16 @@ macro_rules! with_support {
 
 /// A reconstructed volume: coefficients + kernel, evaluable anywhere.
 /// `T` is the coefficient storage ([`Coefficient`]); arithmetic is `f64`.
+///
+/// The coefficients may be stored relative to an [`Field::offset`]: the
+/// reconstruction is then `offset + Σ w·c`, and every evaluation returns
+/// the `Σ w·c` part. The renderer and the classifications compare
+/// evaluations only with [`Field::separating_iso`], which maps the scene's
+/// iso-value into the same frame, so a shifted field renders the same
+/// surface. `f16` storage is centred on the scene's iso-value this way:
+/// near the surface the stored values are then small, where `f16`'s
+/// absolute precision is fine, instead of near the iso-value, where its
+/// 11 bits round by the data's scale over 2048.
 #[derive(Clone, Debug)]
 pub struct Field<T: Coefficient = f64> {
     kind: FilterKind,
@@ -61,6 +71,8 @@ pub struct Field<T: Coefficient = f64> {
     coeffs: Coeffs<T>,
     /// Largest coefficient magnitude (computed once; see `separating_iso`).
     max_abs: f64,
+    /// What the coefficients are relative to (0 unless shifted).
+    offset: f64,
 }
 
 impl<T: Coefficient> Field<T> {
@@ -119,7 +131,20 @@ impl<T: Coefficient> Field<T> {
             kernel: kind.kernel(),
             coeffs,
             max_abs,
+            offset: 0.0,
         }
+    }
+
+    /// The field whose coefficients, these, are stored relative to
+    /// `offset`: it is `offset + Σ w·c` (see [`Field`]).
+    pub fn with_offset(self, offset: f64) -> Field<T> {
+        Field { offset, ..self }
+    }
+
+    /// What the stored coefficients, and so every evaluation, are relative
+    /// to: the reconstructed value is `offset() + value(p)`.
+    pub fn offset(&self) -> f64 {
+        self.offset
     }
 
     pub fn kind(&self) -> FilterKind {
@@ -160,7 +185,11 @@ impl<T: Coefficient> Field<T> {
     /// and outside. Deciding sides against `iso + ε`, with `ε` far above f64
     /// summation noise (≈1e-14 of the coefficient scale) yet far below any
     /// geometric tolerance, makes "equal to the iso-value" reliably outside.
+    ///
+    /// The result is in the frame of the stored coefficients (`iso` less
+    /// [`Field::offset`]): what evaluations are compared with.
     pub fn separating_iso(&self, iso: f64) -> f64 {
+        let iso = iso - self.offset;
         iso + 1e-11 * iso.abs().max(self.max_abs_coeff()).max(f64::MIN_POSITIVE)
     }
 

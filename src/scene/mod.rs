@@ -203,10 +203,11 @@ pub enum Storage {
     /// backdrop units (`tests/storage.rs`).
     F32,
     /// 2 bytes per coefficient (11 significant bits, at most ±65504): a
-    /// quarter of `f64`'s memory. Prefiltered as `f32`, then rounded once;
-    /// a field whose coefficients exceed the range is refused. What it
-    /// costs in accuracy is measured in BENCHMARKS.md (*Coefficient
-    /// storage*) and `tests/storage.rs`.
+    /// quarter of `f64`'s memory. Prefiltered as `f32`, less the scene's
+    /// iso-value (so the values near the surface are small, where `f16`
+    /// is precise), then rounded once; a field whose shifted coefficients
+    /// exceed the range is refused. What it costs in accuracy is measured
+    /// in BENCHMARKS.md (*Coefficient storage*) and `tests/storage.rs`.
     F16,
 }
 
