@@ -135,8 +135,8 @@ impl<T: Coefficient> Field<T> {
         }
     }
 
-    /// The field whose coefficients, these, are stored relative to
-    /// `offset`: it is `offset + Σ w·c` (see [`Field`]).
+    /// This field with its coefficients taken as stored relative to
+    /// `offset`: the field `offset + Σ w·c` (see [`Field`]).
     pub fn with_offset(self, offset: f64) -> Field<T> {
         Field { offset, ..self }
     }
