@@ -196,7 +196,7 @@ pub enum Storage {
     #[default]
     F64,
     /// 4 bytes per coefficient: half the coefficients' memory (the 1024³
-    /// phantom's peak 13.9 → 9.7 GB, BENCHMARKS.md scaling). The
+    /// phantom's peak 13.8 → 9.9 GiB, BENCHMARKS.md scaling). The
     /// prefilter runs in place, each line in `f64`, rounding to `f32` after
     /// each axis pass (within 4 `f32` ulps of the largest coefficient,
     /// tested); on the glass sphere the hits move by a median 1.5e-5
