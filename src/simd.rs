@@ -52,7 +52,7 @@ impl Isa {
             // F16C for the `f16` storage's row loads, and the scalar bit
             // instructions the walk and the tagged-cell index use: every CPU
             // with AVX2 has them.
-            let f16c = std::arch::is_x86_feature_detected!("f16c")
+            let extras = std::arch::is_x86_feature_detected!("f16c")
                 && std::arch::is_x86_feature_detected!("popcnt")
                 && std::arch::is_x86_feature_detected!("bmi1")
                 && std::arch::is_x86_feature_detected!("bmi2")
@@ -61,13 +61,13 @@ impl Isa {
                 && std::arch::is_x86_feature_detected!("avx512vl")
                 && std::arch::is_x86_feature_detected!("avx512dq")
                 && std::arch::is_x86_feature_detected!("fma")
-                && f16c
+                && extras
             {
                 return Isa::Avx512;
             }
             if std::arch::is_x86_feature_detected!("avx2")
                 && std::arch::is_x86_feature_detected!("fma")
-                && f16c
+                && extras
             {
                 return Isa::Avx2;
             }

@@ -31,9 +31,20 @@ fn frame(storage: &str) -> render::Frame {
     }
 }
 
-/// Pixels with the same event count, and the sorted hit differences of the
-/// refracted ones among them (backdrop units).
-fn differences(a: &render::Frame, b: &render::Frame) -> (usize, Vec<f64>) {
+/// How far `b`'s hits are from `a`'s: pixels with the same event count,
+/// and the percentiles of the hit differences (backdrop units) of the
+/// refracted ones among them.
+#[derive(Debug)]
+struct Spread {
+    pixels: usize,
+    same_events: usize,
+    refracted: usize,
+    p50: f64,
+    p90: f64,
+    max: f64,
+}
+
+fn spread(a: &render::Frame, b: &render::Frame) -> Spread {
     let (mut same_events, mut diffs) = (0, Vec::new());
     for i in 0..a.film.u.len() {
         if a.film.events[i] != b.film.events[i] {
@@ -48,34 +59,33 @@ fn differences(a: &render::Frame, b: &render::Frame) -> (usize, Vec<f64>) {
         }
     }
     diffs.sort_by(f64::total_cmp);
-    (same_events, diffs)
+    assert!(diffs.len() > 3000, "the sphere refracts: {}", diffs.len());
+    let q = |p: f64| diffs[((diffs.len() - 1) as f64 * p) as usize];
+    let s = Spread {
+        pixels: a.film.u.len(),
+        same_events,
+        refracted: diffs.len(),
+        p50: q(0.5),
+        p90: q(0.9),
+        max: q(1.0),
+    };
+    eprintln!(
+        "events equal {}/{}, refracted {}: p50 {:.2e} p90 {:.2e} max {:.2e}",
+        s.same_events, s.pixels, s.refracted, s.p50, s.p90, s.max
+    );
+    s
 }
 
 #[test]
 fn f32_storage_stays_within_its_rounding_of_f64() {
     let (a, b) = (frame("f64"), frame("f32"));
     assert_eq!(Storage::F32.name(), "f32");
-    let (same_events, diffs) = differences(&a, &b);
-    let hits = diffs.len();
-    let n = a.film.u.len();
-    let q = |p: f64| diffs[((diffs.len() - 1) as f64 * p) as usize];
-    eprintln!(
-        "events equal {same_events}/{n}, refracted {hits}: p50 {:.2e} p90 {:.2e} max {:.2e}",
-        q(0.5),
-        q(0.9),
-        q(1.0)
-    );
-    assert!(hits > 3000, "the sphere refracts: {hits}");
-    assert!(same_events * 1000 >= n * 995, "{same_events} of {n}");
+    let s = spread(&a, &b);
+    assert!(s.same_events * 1000 >= s.pixels * 995, "{s:?}");
     // The storage really differs (the f32 field is not the f64 one) ...
-    assert!(q(1.0) > 0.0, "f32 storage rendered the f64 bits");
+    assert!(s.max > 0.0, "f32 storage rendered the f64 bits");
     // ... by rounding only: backdrop units, checker squares of 8.
-    assert!(
-        q(0.5) < 1e-4 && q(0.9) < 1e-3,
-        "p50 {} p90 {}",
-        q(0.5),
-        q(0.9)
-    );
+    assert!(s.p50 < 1e-4 && s.p90 < 1e-3, "{s:?}");
 }
 
 /// The sphere at 128×128 with `f16` coefficients centred on `centre`.
@@ -101,36 +111,19 @@ fn f16_frame_centred_on(centre: f64) -> render::Frame {
     render::render(&scene, &prep, None)
 }
 
-/// The median and 90th percentile of the refracted pixels' differences, and
-/// the pixels with equal event counts.
-fn f16_error(b: &render::Frame) -> (f64, f64, usize) {
-    let a = frame("f64");
-    let (same_events, diffs) = differences(&a, b);
-    let n = a.film.u.len();
-    let q = |p: f64| diffs[((diffs.len() - 1) as f64 * p) as usize];
-    eprintln!(
-        "events equal {same_events}/{n}, refracted {}: p50 {:.2e} p90 {:.2e} max {:.2e}",
-        diffs.len(),
-        q(0.5),
-        q(0.9),
-        q(1.0)
-    );
-    assert!(diffs.len() > 3000, "the sphere refracts: {}", diffs.len());
-    (q(0.5), q(0.9), same_events)
-}
-
 /// `f16` coefficients are stored less the iso-value, where `f16` is
 /// precise; centred elsewhere (here on 0, as plain rounding would store
 /// them) the surface is the same within a coarser rounding — the centre
 /// buys precision, never correctness.
 #[test]
 fn f16_centred_on_the_iso_value_is_five_times_closer() {
-    let centred = f16_error(&frame("f16"));
-    let plain = f16_error(&f16_frame_centred_on(0.0));
+    let reference = frame("f64");
+    let centred = spread(&reference, &frame("f16"));
+    let plain = spread(&reference, &f16_frame_centred_on(0.0));
     // Measured: centred p50 7.7e-3, p90 5.0e-2; on 0 3.9e-2 and 0.26.
-    assert!(plain.0 < 0.2 && plain.1 < 1.0, "{plain:?}");
+    assert!(plain.p50 < 0.2 && plain.p90 < 1.0, "{plain:?}");
     assert!(
-        centred.0 * 3.0 < plain.0 && centred.1 * 3.0 < plain.1,
+        centred.p50 * 3.0 < plain.p50 && centred.p90 * 3.0 < plain.p90,
         "{centred:?} {plain:?}"
     );
 }
@@ -143,28 +136,13 @@ fn f16_storage_stays_within_its_rounding_of_f64() {
     // p90 0.0073 checker squares.
     let (a, b) = (frame("f64"), frame("f16"));
     assert_eq!(b.stats.counters.undefined, 0);
-    let (same_events, diffs) = differences(&a, &b);
-    let n = a.film.u.len();
-    let q = |p: f64| diffs[((diffs.len() - 1) as f64 * p) as usize];
-    eprintln!(
-        "events equal {same_events}/{n}, refracted {}: p50 {:.2e} p90 {:.2e} max {:.2e}",
-        diffs.len(),
-        q(0.5),
-        q(0.9),
-        q(1.0)
-    );
-    assert!(diffs.len() > 3000, "the sphere refracts: {}", diffs.len());
-    assert!(same_events * 1000 >= n * 995, "{same_events} of {n}");
+    let s = spread(&a, &b);
+    assert!(s.same_events * 1000 >= s.pixels * 995, "{s:?}");
     // Coarser than f32 (whose p50 is below 1e-4) ...
-    assert!(q(0.5) > 1e-3, "p50 {}", q(0.5));
+    assert!(s.p50 > 1e-3, "{s:?}");
     // ... and far below the u8 reconstruction error (a p50 of 1.4
     // backdrop units against the analytic sphere).
-    assert!(
-        q(0.5) < 0.02 && q(0.9) < 0.12,
-        "p50 {} p90 {}",
-        q(0.5),
-        q(0.9)
-    );
+    assert!(s.p50 < 0.02 && s.p90 < 0.12, "{s:?}");
 }
 
 #[test]

@@ -202,11 +202,6 @@ impl<T: Coefficient> Coeffs<T> {
         &mut self.data
     }
 
-    /// The same grid in another storage, each value converted.
-    pub fn convert<U: Coefficient>(&self) -> Coeffs<U> {
-        self.convert_shifted(0.0)
-    }
-
     /// The grid less `shift` in another storage: each value `v` becomes
     /// `v - shift` (in `f64`), rounded once to `U`.
     pub fn convert_shifted<U: Coefficient>(&self, shift: f64) -> Coeffs<U> {

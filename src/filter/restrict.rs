@@ -137,19 +137,10 @@ impl<T: Coefficient> Field<T> {
         iso: f64,
         out: &mut [[f64; L]; N],
     ) {
-        let kernel = self.kernel();
-        let coeffs = self.coeffs();
-        let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
-        let data = coeffs.data();
-        let span = (S - 1) * (sy + sz) + S;
-        for l in 0..L {
-            assert!(
-                seg.base[l] + span <= data.len(),
-                "lane neighbourhood inside the grid"
-            );
-        }
         #[cfg(target_arch = "x86_64")]
         if S == 4 && L == 8 && M::FUSED && crate::simd::Isa::current() == crate::simd::Isa::Avx512 {
+            let kernel = self.kernel();
+            let (data, sy, sz) = self.lane_rows::<S, L>(seg);
             let mut poly = [[0.0; 4]; 4];
             for (j, p) in poly.iter_mut().enumerate() {
                 p.copy_from_slice(&kernel.weight_poly(j)[..4]);
@@ -165,7 +156,7 @@ impl<T: Coefficient> Field<T> {
             base.copy_from_slice(&seg.base);
             let mut g = [[0.0f64; 8]; N];
             // SAFETY: AVX-512 and FMA checked above; every row lies in
-            // `base + span <= data.len()` (asserted).
+            // `base + span <= data.len()` (asserted by `lane_rows`).
             unsafe {
                 crate::simd::restrict_cubic_x8(
                     data,
@@ -186,16 +177,14 @@ impl<T: Coefficient> Field<T> {
         self.restrict_lanes_generic::<S, L, M>(seg, iso, out)
     }
 
-    /// [`Field::restrict_lanes`] for any support and lane count, in
-    /// loops over lanes left to the compiler.
+    /// The coefficients and their row and plane strides, once every lane's
+    /// support-`S` neighbourhood is checked to lie inside them (the lane
+    /// kernels index rows from `seg.base` without further checks).
     #[inline(always)]
-    fn restrict_lanes_generic<const S: usize, const L: usize, M: Madd>(
+    fn lane_rows<const S: usize, const L: usize>(
         &self,
         seg: &LaneSegments<L>,
-        iso: f64,
-        out: &mut [[f64; L]; N],
-    ) {
-        let kernel = self.kernel();
+    ) -> (&[T], usize, usize) {
         let coeffs = self.coeffs();
         let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
         let data = coeffs.data();
@@ -206,6 +195,20 @@ impl<T: Coefficient> Field<T> {
                 "lane neighbourhood inside the grid"
             );
         }
+        (data, sy, sz)
+    }
+
+    /// [`Field::restrict_lanes`] for any support and lane count, in
+    /// loops over lanes left to the compiler.
+    #[inline(always)]
+    fn restrict_lanes_generic<const S: usize, const L: usize, M: Madd>(
+        &self,
+        seg: &LaneSegments<L>,
+        iso: f64,
+        out: &mut [[f64; L]; N],
+    ) {
+        let kernel = self.kernel();
+        let (data, sy, sz) = self.lane_rows::<S, L>(seg);
         // w[a][j][m][lane]: weight polynomial j of axis a composed with the segment.
         let mut w = [[[[0.0f64; L]; S]; S]; 3];
         for a in 0..3 {
@@ -244,14 +247,14 @@ impl<T: Coefficient> Field<T> {
                 // load per lane and a transpose beat four gathers (same values).
                 let rows4 = (S == 4).then(|| {
                     // SAFETY: base + row + 3 < base + span <= data.len()
-                    // (asserted above); L is bound by `with_isa!`.
+                    // (asserted by `lane_rows`); L is bound by `with_isa!`.
                     unsafe { crate::simd::gather_rows4::<T, L>(data, &seg.base, row) }
                 });
                 for i in 0..S {
                     let c: [f64; L] = match &rows4 {
                         Some(r) => r[i],
                         // SAFETY: base + row + i < base + span <= data.len()
-                        // (asserted above); L is bound by `with_isa!`.
+                        // (asserted by `lane_rows`); L is bound by `with_isa!`.
                         None => unsafe { T::gather(data, &seg.base, row + i) },
                     };
                     let wx = &w[0][i];
