@@ -95,6 +95,12 @@ impl Bricked {
         }
     }
 
+    /// Bricks per axis (the strides of [`Bricked::index`], for lane code
+    /// that computes it eight cells at a time).
+    pub fn bricks(&self) -> [usize; 3] {
+        self.bricks
+    }
+
     /// Slots of a map over all bricks (padding cells included).
     pub fn len(&self) -> usize {
         self.bricks.iter().product::<usize>() * 64

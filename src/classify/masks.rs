@@ -77,6 +77,12 @@ impl SubCellMasks {
         Some(SubCellMasks { index, masks })
     }
 
+    /// The index the masks are kept in, and the masks in its slot order
+    /// (for lane code that gathers them).
+    pub fn parts(&self) -> (&TaggedIndex, &[u64]) {
+        (&self.index, &self.masks)
+    }
+
     /// The mask of cell `c` (in range); `None` when the cell is not tagged.
     #[inline(always)]
     pub fn get(&self, c: [i64; 3]) -> Option<u64> {

@@ -54,6 +54,18 @@ impl TaggedIndex {
         }
     }
 
+    /// The brick layout the index is kept in.
+    pub fn bricked(&self) -> Bricked {
+        self.bricked
+    }
+
+    /// Per brick: the tag bits (bit `k` for the brick's slot `k`), and the
+    /// tagged cells before it — [`TaggedIndex::slot`]'s two tables, for lane
+    /// code that gathers them.
+    pub fn words(&self) -> (&[u64], &[u32]) {
+        (&self.words, &self.rank)
+    }
+
     /// Tagged cells (the length of every table over this index).
     pub fn count(&self) -> usize {
         self.count

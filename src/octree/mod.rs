@@ -149,6 +149,18 @@ impl Octree {
         &self.tags
     }
 
+    /// The flattened skip map ([`Octree::skip_byte`] per slot of
+    /// [`Octree::bricked`]), for lane code that gathers it; its length is
+    /// a multiple of 64.
+    pub fn skip_map(&self) -> &[u8] {
+        &self.skip
+    }
+
+    /// The brick layout of [`Octree::skip_map`].
+    pub fn bricked(&self) -> Bricked {
+        self.bricked
+    }
+
     pub fn bytes(&self) -> usize {
         self.tags.bytes()
             + self.levels.iter().map(|l| l.words.len() * 8).sum::<usize>()

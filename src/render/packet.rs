@@ -23,6 +23,7 @@ pub enum Fate {
 }
 
 /// The rays of a tile, one entry per ray in every array.
+#[derive(Clone)]
 pub struct Rays<'a> {
     /// Image pixel index `y * width + x`.
     pub pixel: BVec<'a, u32>,

@@ -7,6 +7,9 @@
 //!   at the first candidate cell. Skipping a block is one step: the ray jumps to
 //!   where it leaves the block, so the DDA is the octree with a single level.
 
+#[cfg(target_arch = "x86_64")]
+pub mod wide;
+
 use super::super::context::{Ctx, Skip};
 use super::super::packet::{Fate, Queue, Rays};
 use super::field_minus_iso;
@@ -35,6 +38,14 @@ pub fn traverse<const S: usize, T: Coefficient>(
         }
         Traversal::Dda | Traversal::Octree | Traversal::Distance => match &ctx.skip {
             Skip::Octree { tree, leaf_level } => {
+                #[cfg(target_arch = "x86_64")]
+                if wide::fits(ctx, tree) {
+                    // SAFETY: `fits` checked the CPU's features and the maps.
+                    unsafe {
+                        wide::walk_octree(ctx, (tree, *leaf_level), rays, input, solve, record, c)
+                    };
+                    return;
+                }
                 let octree = OctreeBlocks {
                     tree,
                     leaf_level: *leaf_level,

@@ -1,0 +1,854 @@
+//! The octree walk (and the plain DDA, its one-level case) eight rays at a
+//! time, with AVX-512.
+//!
+//! The scalar walk ([`super::walk_interleaved`]) spends about 230
+//! instructions on a cell visit (cachegrind, sphere): the brick index of
+//! the cell, the skip byte, for a tagged cell its segment and sub-cell
+//! test, and the exit from the cell or block, with branches the hardware
+//! cannot predict. Here eight walks step together: each of those
+//! operations is one vector instruction for all eight lanes, the loads are
+//! gathers, and every per-lane choice is a mask — about 50 instructions
+//! per visit. A lane whose walk ends, at a candidate cell (to the solve
+//! queue) or out of its piece (to the record queue), is refilled with the
+//! next ray at once; two groups of lanes step in turn, so one group's
+//! arithmetic fills the other's wait on its gathers (a gather's latency is
+//! about 35 cycles on this Zen 4).
+//!
+//! What it buys is smaller than the instruction counts suggest: Zen 4 runs
+//! a 512-bit operation as two 256-bit halves and a gather of eight at about
+//! one element per two cycles. Sphere, single thread, min / median of 5
+//! alternating runs: the traverse stage 55.4 / 58.8 → 33.9 / 34.5 ms, the
+//! frame 139 / 144 → 119 / 120 ms (BENCHMARKS.md has the runs).
+//!
+//! Every lane does the scalar walk's arithmetic in the same order (no fused
+//! multiply-adds, the same `min`/`max` operand order, whose NaN rule the
+//! vector instructions share), so each ray visits the same cells and hands
+//! the same segment bits to the solve stage as the scalar walk — tested
+//! below against it, ray by ray, through edges and corners and along axes.
+//! Only the order rays leave in differs, and nothing downstream depends on
+//! it.
+//!
+//! Rays are taken from the input in chunks of [`CHUNK`]: each chunk's start
+//! states (the piece in cell coordinates, its cell and parameter, stepped
+//! past the cell when `advance` is set) are laid out contiguously first, so
+//! a refill is one masked expand per column.
+
+use std::arch::x86_64::*;
+use std::sync::OnceLock;
+
+use super::super::super::context::Ctx;
+use super::super::super::packet::{Fate, Queue, Rays};
+use super::{cell_ray, exit_cell};
+use crate::classify::bezier::SUB;
+use crate::filter::coeffs::Coefficient;
+use crate::octree::{Octree, TAGGED};
+use crate::render::stats::Counters;
+
+const LANES: usize = 8;
+
+/// Rays staged at a time.
+const CHUNK: usize = 64;
+
+/// A staged column: a chunk and a lane group of slack, so a full-width load
+/// at any position inside the chunk stays inside the column.
+type Col<T> = [T; CHUNK + LANES];
+
+const _: () = assert!(SUB == 4, "the span masks below assume 4³ sub-cells");
+
+/// Whether this CPU runs the wide walk: AVX-512 (F, DQ) with the
+/// vector population count the tagged-cell index needs, when the renderer
+/// runs its AVX-512 lanes ([`crate::simd::Isa::current`], so `SNELL_ISA`
+/// below `avx512` selects the scalar walk).
+pub fn available() -> bool {
+    static OK: OnceLock<bool> = OnceLock::new();
+    *OK.get_or_init(|| {
+        crate::simd::Isa::current() == crate::simd::Isa::Avx512
+            && std::arch::is_x86_feature_detected!("avx512vpopcntdq")
+    })
+}
+
+/// The start states of up to [`CHUNK`] rays, column by column.
+struct Staged {
+    len: usize,
+    r: Col<i64>,
+    ou: [Col<f64>; 3],
+    du: [Col<f64>; 3],
+    inv: [Col<f64>; 3],
+    cell: [Col<i64>; 3],
+    t: Col<f64>,
+    t_start: Col<f64>,
+    t_end: Col<f64>,
+}
+
+impl Staged {
+    fn new() -> Staged {
+        Staged {
+            len: 0,
+            r: [0; CHUNK + LANES],
+            ou: [[0.0; CHUNK + LANES]; 3],
+            du: [[0.0; CHUNK + LANES]; 3],
+            inv: [[0.0; CHUNK + LANES]; 3],
+            cell: [[0; CHUNK + LANES]; 3],
+            t: [0.0; CHUNK + LANES],
+            t_start: [0.0; CHUNK + LANES],
+            t_end: [0.0; CHUNK + LANES],
+        }
+    }
+
+    /// Stages `input`'s rays (at most [`CHUNK`]) as the scalar walk starts
+    /// them ([`super::Walk::start`]).
+    fn stage<T: Coefficient>(&mut self, ctx: &Ctx<T>, rays: &mut Rays, input: &[u32]) {
+        debug_assert!(input.len() <= CHUNK);
+        for (k, &r) in input.iter().enumerate() {
+            let i = r as usize;
+            let ray = cell_ray(ctx, rays, i);
+            let mut cell = rays.cell_of(i);
+            let mut t = rays.t[i];
+            if rays.advance[i] {
+                rays.advance[i] = false;
+                (t, cell) = exit_cell(&ray, cell, t);
+            }
+            self.r[k] = r as i64;
+            for a in 0..3 {
+                self.ou[a][k] = ray.ou[a];
+                self.du[a][k] = ray.du[a];
+                self.inv[a][k] = ray.inv[a];
+                self.cell[a][k] = cell[a];
+            }
+            self.t[k] = t;
+            self.t_start[k] = rays.t_start[i];
+            self.t_end[k] = rays.t_end[i];
+        }
+        self.len = input.len();
+    }
+}
+
+/// Eight walks in registers.
+#[derive(Clone, Copy)]
+struct Lanes {
+    r: __m512i,
+    ou: [__m512d; 3],
+    du: [__m512d; 3],
+    inv: [__m512d; 3],
+    cell: [__m512i; 3],
+    t: __m512d,
+    t_start: __m512d,
+    t_end: __m512d,
+}
+
+/// What the walk reads, as vectors and base pointers.
+struct Space<'a> {
+    /// Cells per axis (the lattice's, as [`super::in_range`] checks).
+    n: [__m512i; 3],
+    /// Bricks along x and y ([`crate::lattice::Bricked::index`]'s strides).
+    bricks: [__m512i; 2],
+    skip: &'a [u8],
+    leaf_level: __m512i,
+    /// The tagged-cell index's words and ranks, and the sub-cell masks in
+    /// its slot order.
+    masks: Option<(&'a [u64], &'a [u32], &'a [u64])>,
+}
+
+/// `(x & 3)` and friends: the bricked slot of each lane's cell.
+#[inline(always)]
+unsafe fn brick_slot(s: &Space, cell: &[__m512i; 3]) -> __m512i {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe {
+        let [x, y, z] = *cell;
+        let three = _mm512_set1_epi64(3);
+        let brick = _mm512_add_epi64(
+            _mm512_srli_epi64::<2>(x),
+            _mm512_mullo_epi64(
+                s.bricks[0],
+                _mm512_add_epi64(
+                    _mm512_srli_epi64::<2>(y),
+                    _mm512_mullo_epi64(s.bricks[1], _mm512_srli_epi64::<2>(z)),
+                ),
+            ),
+        );
+        let within = _mm512_or_si512(
+            _mm512_and_si512(x, three),
+            _mm512_or_si512(
+                _mm512_slli_epi64::<2>(_mm512_and_si512(y, three)),
+                _mm512_slli_epi64::<4>(_mm512_and_si512(z, three)),
+            ),
+        );
+        _mm512_or_si512(_mm512_slli_epi64::<6>(brick), within)
+    }
+}
+
+/// [`super::clamped_floor`] per lane: the clamp first, then truncation.
+#[inline(always)]
+unsafe fn clamped_floor(x: __m512d, lo: __m512d, hi: __m512d) -> __m512i {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe { _mm512_cvttpd_epi64(_mm512_min_pd(_mm512_max_pd(x, lo), hi)) }
+}
+
+/// The sub-cell bits whose index along the axis of stride `s = 2^log` (1,
+/// 4, 16 in the 4³ layout) lies in `lo..=hi`: `rep·(2^(s(hi+1)) − 2^(s·lo))`, with
+/// `rep` one bit per row along that axis — what the scalar walk looks up
+/// in [`super::AXIS_SPAN`] (tested equal). Shifts by 64 give 0, so the top
+/// row needs no special case.
+#[inline(always)]
+unsafe fn axis_span(rep: u64, log: u64, lo: __m512i, hi: __m512i) -> __m512i {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe {
+        let rep = _mm512_set1_epi64(rep as i64);
+        let log = _mm512_set1_epi64(log as i64);
+        let one = _mm512_set1_epi64(1);
+        let top = _mm512_sllv_epi64(_mm512_add_epi64(hi, one), log);
+        let bottom = _mm512_sllv_epi64(lo, log);
+        _mm512_sub_epi64(_mm512_sllv_epi64(rep, top), _mm512_sllv_epi64(rep, bottom))
+    }
+}
+
+/// `rep` and the stride's log₂ per axis of the 4³ sub-cell layout (x
+/// fastest).
+const SPAN_ROWS: [(u64, u64); 3] = [
+    (0x1111_1111_1111_1111, 0),
+    (0x0001_0001_0001_0001, 2),
+    (1, 4),
+];
+
+/// [`super::may_meet_tagged_sub_cell`] per lane.
+#[inline(always)]
+unsafe fn may_meet(l: &Lanes, t0: __m512d, t1: __m512d, mask: __m512i) -> __mmask8 {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe {
+        let n = _mm512_set1_pd(SUB as f64);
+        let zero = _mm512_setzero_pd();
+        let last = _mm512_set1_pd(SUB as f64 - 1.0);
+        let eps = _mm512_set1_pd(1e-9);
+        let mut bbox = _mm512_set1_epi64(-1);
+        for a in 0..3 {
+            let cf = _mm512_cvtepi64_pd(l.cell[a]);
+            let local = |t: __m512d| {
+                _mm512_mul_pd(
+                    n,
+                    _mm512_sub_pd(_mm512_add_pd(l.ou[a], _mm512_mul_pd(t, l.du[a])), cf),
+                )
+            };
+            let (v0, v1) = (local(t0), local(t1));
+            let (lo, hi) = (_mm512_min_pd(v0, v1), _mm512_max_pd(v0, v1));
+            let lo = clamped_floor(_mm512_sub_pd(lo, eps), zero, last);
+            let hi = clamped_floor(_mm512_add_pd(hi, eps), zero, last);
+            let (rep, log) = SPAN_ROWS[a];
+            let span = axis_span(rep, log, lo, hi);
+            let d = _mm512_sub_pd(v0, v1);
+            let nan = _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(d, d);
+            bbox = _mm512_and_si512(
+                bbox,
+                _mm512_mask_mov_epi64(span, nan, _mm512_set1_epi64(-1)),
+            );
+        }
+        _mm512_test_epi64_mask(mask, bbox)
+    }
+}
+
+/// [`super::cell_span`] per lane, then clipped to the piece as
+/// [`super::tagged_segment`] does.
+#[inline(always)]
+unsafe fn tagged_segment(l: &Lanes) -> (__m512d, __m512d) {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe {
+        let mut c0 = _mm512_set1_pd(f64::NEG_INFINITY);
+        let mut c1 = _mm512_set1_pd(f64::INFINITY);
+        let one = _mm512_set1_epi64(1);
+        for a in 0..3 {
+            let moves = _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(l.du[a], _mm512_setzero_pd());
+            let ta = _mm512_mul_pd(
+                _mm512_sub_pd(_mm512_cvtepi64_pd(l.cell[a]), l.ou[a]),
+                l.inv[a],
+            );
+            let tb = _mm512_mul_pd(
+                _mm512_sub_pd(
+                    _mm512_cvtepi64_pd(_mm512_add_epi64(l.cell[a], one)),
+                    l.ou[a],
+                ),
+                l.inv[a],
+            );
+            c0 = _mm512_mask_max_pd(c0, moves, c0, _mm512_min_pd(ta, tb));
+            c1 = _mm512_mask_min_pd(c1, moves, c1, _mm512_max_pd(ta, tb));
+        }
+        let t0 = _mm512_max_pd(c0, l.t_start);
+        let t1 = _mm512_max_pd(_mm512_min_pd(c1, l.t_end), t0);
+        (t0, t1)
+    }
+}
+
+/// [`super::exit_block`] per lane, with per-lane levels (0: the cell).
+#[inline(always)]
+unsafe fn exit_block(l: &Lanes, level: __m512i) -> (__m512d, [__m512i; 3]) {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe {
+        let one = _mm512_set1_epi64(1);
+        let zero = _mm512_setzero_pd();
+        let size = _mm512_sllv_epi64(one, level);
+        let mut lo = [_mm512_setzero_si512(); 3];
+        let mut hi = [_mm512_setzero_si512(); 3];
+        let mut te = [_mm512_setzero_pd(); 3];
+        let mut pos = [0u8; 3];
+        let mut neg = [0u8; 3];
+        for a in 0..3 {
+            lo[a] = _mm512_sllv_epi64(_mm512_srav_epi64(l.cell[a], level), level);
+            hi[a] = _mm512_sub_epi64(_mm512_add_epi64(lo[a], size), one);
+            pos[a] = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(l.du[a], zero);
+            neg[a] = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(l.du[a], zero);
+            let wall = _mm512_mask_mov_epi64(lo[a], pos[a], _mm512_add_epi64(hi[a], one));
+            let tw = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi64_pd(wall), l.ou[a]), l.inv[a]);
+            te[a] = _mm512_mask_mov_pd(_mm512_set1_pd(f64::INFINITY), pos[a] | neg[a], tw);
+        }
+        // The scalar walk's axis choice: x unless y is strictly sooner (or x
+        // is NaN), then that unless z is.
+        let first01 = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(te[0], te[1]);
+        let t01 = _mm512_mask_mov_pd(te[1], first01, te[0]);
+        let before2 = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(t01, te[2]);
+        let t_exit = _mm512_mask_mov_pd(te[2], before2, t01);
+        let axis = [first01 & before2, !first01 & before2, !before2];
+        let t_new = _mm512_max_pd(t_exit, l.t);
+        let mut next = l.cell;
+        for a in 0..3 {
+            let at = _mm512_add_pd(l.ou[a], _mm512_mul_pd(t_new, l.du[a]));
+            // Up: floor clamped to [cell, hi]; down: to [lo, cell]; along an
+            // axis the ray does not move, [cell, cell] (the clamp gives the
+            // cell, as the scalar walk's choice does).
+            let floor_lo = _mm512_mask_mov_epi64(l.cell[a], neg[a], lo[a]);
+            let floor_hi = _mm512_mask_mov_epi64(l.cell[a], pos[a], hi[a]);
+            let inside = clamped_floor(
+                at,
+                _mm512_cvtepi64_pd(floor_lo),
+                _mm512_cvtepi64_pd(floor_hi),
+            );
+            let past = _mm512_mask_mov_epi64(
+                _mm512_mask_mov_epi64(l.cell[a], neg[a], _mm512_sub_epi64(lo[a], one)),
+                pos[a],
+                _mm512_add_epi64(hi[a], one),
+            );
+            next[a] = _mm512_mask_mov_epi64(inside, axis[a], past);
+        }
+        (t_new, next)
+    }
+}
+
+/// Lanes that end their walk this step.
+struct Ended {
+    solve: __mmask8,
+    escaped: __mmask8,
+    t0: __m512d,
+    t1: __m512d,
+}
+
+/// One step of every `live` lane ([`super::Walk::step`]): lanes that leave
+/// their piece or the lattice escape, lanes at a candidate cell end with
+/// its segment, the others move past their cell or empty block.
+#[inline(always)]
+unsafe fn step(s: &Space, l: &mut Lanes, live: __mmask8, c: &mut Counters) -> Ended {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe {
+        let one = _mm512_set1_epi64(1);
+        let byte_mask = _mm512_set1_epi64(0xFF);
+        let mut inside = _mm512_cmp_pd_mask::<_CMP_NGE_UQ>(l.t, l.t_end);
+        for a in 0..3 {
+            inside &= _mm512_cmplt_epu64_mask(l.cell[a], s.n[a]);
+        }
+        let go = live & inside;
+        let escaped = live & !inside;
+        c.cells_visited += go.count_ones() as u64;
+
+        let slot = brick_slot(s, &l.cell);
+        // The byte of each slot, from the aligned dword holding it.
+        // SAFETY: the lanes of `go` hold cells of the lattice, whose slots lie
+        // in the map; its length is a multiple of 64, so the dword does too.
+        let dword = _mm512_mask_i64gather_epi32::<4>(
+            _mm256_setzero_si256(),
+            go,
+            _mm512_srli_epi64::<2>(slot),
+            s.skip.as_ptr() as *const i32,
+        );
+        let shift = _mm512_slli_epi64::<3>(_mm512_and_si512(slot, _mm512_set1_epi64(3)));
+        let byte = _mm512_and_si512(
+            _mm512_srlv_epi64(_mm512_cvtepu32_epi64(dword), shift),
+            byte_mask,
+        );
+        let tagged = _mm512_mask_cmpeq_epi64_mask(go, byte, _mm512_set1_epi64(TAGGED as i64));
+        let small = _mm512_cmplt_epu64_mask(byte, s.leaf_level);
+        let level = _mm512_maskz_mov_epi64(!(tagged | small), byte);
+
+        // Steps with no lane at a tagged cell (a fifth on the sphere) skip
+        // the segments and the sub-cell test.
+        let (solve, skipped, t0, t1) = if tagged == 0 {
+            (0, 0, _mm512_setzero_pd(), _mm512_setzero_pd())
+        } else {
+            let (t0, t1) = tagged_segment(l);
+            let (solve, skipped) = match s.masks {
+                None => (tagged, 0),
+                Some((words, rank, masks)) => {
+                    let brick = _mm512_srli_epi64::<6>(slot);
+                    let bit = _mm512_and_si512(slot, _mm512_set1_epi64(63));
+                    // The index's words are gathered with the skip bytes, not
+                    // after them (a cell with its bit set is a tagged cell), so
+                    // the mask's gather waits for one gather, not two.
+                    // SAFETY (the three gathers): a lattice cell's brick has a
+                    // word and a rank; a tagged cell's rank plus the tags before
+                    // it in its brick is its slot, below the tag count.
+                    let word = _mm512_mask_i64gather_epi64::<8>(
+                        _mm512_setzero_si512(),
+                        go,
+                        brick,
+                        words.as_ptr() as *const i64,
+                    );
+                    let has = _mm512_mask_test_epi64_mask(go, _mm512_srlv_epi64(word, bit), one);
+                    let before = _mm512_cvtepu32_epi64(_mm512_mask_i64gather_epi32::<4>(
+                        _mm256_setzero_si256(),
+                        go,
+                        brick,
+                        rank.as_ptr() as *const i32,
+                    ));
+                    let below =
+                        _mm512_and_si512(word, _mm512_sub_epi64(_mm512_sllv_epi64(one, bit), one));
+                    let index = _mm512_add_epi64(before, _mm512_popcnt_epi64(below));
+                    let mask = _mm512_mask_i64gather_epi64::<8>(
+                        _mm512_setzero_si512(),
+                        has,
+                        index,
+                        masks.as_ptr() as *const i64,
+                    );
+                    let meet = has & may_meet(l, t0, t1, mask);
+                    let has = has & tagged;
+                    ((tagged & !has) | (tagged & meet), has & !meet)
+                }
+            };
+            (solve, skipped, t0, t1)
+        };
+        c.subcell_skips += skipped.count_ones() as u64;
+
+        let moves = go & !solve;
+        let (t_new, next) = exit_block(l, level);
+        l.t = _mm512_mask_mov_pd(l.t, moves, t_new);
+        for a in 0..3 {
+            l.cell[a] = _mm512_mask_mov_epi64(l.cell[a], moves, next[a]);
+        }
+        Ended {
+            solve,
+            escaped,
+            t0,
+            t1,
+        }
+    }
+}
+
+/// Fills the lanes of `free` from the staged chunk at `*pos`, as many as
+/// it has left; returns the lanes filled.
+#[inline(always)]
+unsafe fn refill(l: &mut Lanes, free: __mmask8, staged: &Staged, pos: &mut usize) -> __mmask8 {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; memory accesses are marked below.
+    unsafe {
+        let left = staged.len - *pos;
+        let take = if free.count_ones() as usize <= left {
+            free
+        } else {
+            _pdep_u32((1u32 << left) - 1, free as u32) as u8
+        };
+        let p = *pos;
+        // SAFETY (all loads): `p < staged.len ≤ CHUNK`, and every column holds
+        // `CHUNK + LANES` values.
+        let pd = |old: __m512d, col: &Col<f64>| {
+            _mm512_mask_expand_pd(old, take, _mm512_loadu_pd(col.as_ptr().add(p)))
+        };
+        let epi = |old: __m512i, col: &Col<i64>| {
+            _mm512_mask_expand_epi64(old, take, _mm512_loadu_epi64(col.as_ptr().add(p)))
+        };
+        l.r = epi(l.r, &staged.r);
+        for a in 0..3 {
+            l.ou[a] = pd(l.ou[a], &staged.ou[a]);
+            l.du[a] = pd(l.du[a], &staged.du[a]);
+            l.inv[a] = pd(l.inv[a], &staged.inv[a]);
+            l.cell[a] = epi(l.cell[a], &staged.cell[a]);
+        }
+        l.t = pd(l.t, &staged.t);
+        l.t_start = pd(l.t_start, &staged.t_start);
+        l.t_end = pd(l.t_end, &staged.t_end);
+        *pos += take.count_ones() as usize;
+        take
+    }
+}
+
+/// Whether the wide walk can run over `tree` in `ctx`: the CPU has the
+/// features ([`available`]), and the skip map and the sub-cell masks'
+/// index cover the lattice in one brick layout (they always do when built
+/// from one classification; the gathers rely on it).
+pub fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
+    available()
+        && tree.tags().cells == ctx.lattice.cells
+        && tree.skip_map().len() == tree.bricked().len()
+        && ctx.masks.is_none_or(|m| {
+            let (index, masks) = m.parts();
+            index.bricked() == tree.bricked()
+                && index.words().0.len() * 64 == tree.bricked().len()
+                && index.words().1.len() == index.words().0.len()
+                && masks.len() == index.count()
+        })
+}
+
+/// The walk of every ray of `input` to its next candidate cell (pushed on
+/// `solve`, its segment in `t`/`seg_end` and its cell set) or out of its
+/// piece (pushed on `record`), as [`super::walk_interleaved`] over the
+/// octree does.
+///
+/// # Safety
+/// [`fits`] must be true.
+#[target_feature(enable = "avx512f,avx512dq,avx512vpopcntdq,bmi2,popcnt")]
+pub unsafe fn walk_octree<T: Coefficient>(
+    ctx: &Ctx<T>,
+    (tree, leaf_level): (&Octree, u32),
+    rays: &mut Rays,
+    input: &[u32],
+    solve: &mut Queue,
+    record: &mut Queue,
+    c: &mut Counters,
+) {
+    let bricked = tree.bricked();
+    let masks = ctx.masks.map(|m| {
+        let (index, masks) = m.parts();
+        let (words, rank) = index.words();
+        (words, rank, masks)
+    });
+    let b = bricked.bricks();
+    let space = Space {
+        n: ctx.lattice.cells.map(|n| _mm512_set1_epi64(n as i64)),
+        bricks: [
+            _mm512_set1_epi64(b[0] as i64),
+            _mm512_set1_epi64(b[1] as i64),
+        ],
+        skip: tree.skip_map(),
+        leaf_level: _mm512_set1_epi64(leaf_level as i64),
+        masks,
+    };
+    STAGED.with_borrow_mut(|staged| {
+        // SAFETY: the caller checked the features.
+        unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
+    });
+}
+
+thread_local! {
+    /// Each thread's staging area, kept across calls (a traverse call
+    /// has a tile's rays or fewer; zeroing 9 KiB per call showed up).
+    static STAGED: std::cell::RefCell<Box<Staged>> = std::cell::RefCell::new(Box::new(Staged::new()));
+}
+
+#[target_feature(enable = "avx512f,avx512dq,avx512vpopcntdq,bmi2,popcnt")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn walk<T: Coefficient>(
+    ctx: &Ctx<T>,
+    space: &Space,
+    staged: &mut Staged,
+    rays: &mut Rays,
+    input: &[u32],
+    solve: &mut Queue,
+    record: &mut Queue,
+    c: &mut Counters,
+) {
+    staged.len = 0;
+    let mut chunks = input.chunks(CHUNK);
+    let mut pos = 0;
+    let zd = _mm512_setzero_pd();
+    let zi = _mm512_setzero_si512();
+    let idle = Lanes {
+        r: zi,
+        ou: [zd; 3],
+        du: [zd; 3],
+        inv: [zd; 3],
+        cell: [zi; 3],
+        t: zd,
+        t_start: zd,
+        t_end: zd,
+    };
+    // Two groups of lanes, stepped in turn: a step is a chain of dependent
+    // gathers, and the other group's step fills the wait.
+    let mut group = [idle; GROUPS];
+    let mut live: [__mmask8; GROUPS] = [0; GROUPS];
+    let mut drained = false;
+    loop {
+        for g in 0..GROUPS {
+            while live[g] != 0xFF && !drained {
+                if pos == staged.len {
+                    match chunks.next() {
+                        Some(chunk) => {
+                            staged.stage(ctx, rays, chunk);
+                            pos = 0;
+                        }
+                        None => {
+                            drained = true;
+                            break;
+                        }
+                    }
+                }
+                // SAFETY (here and below): this function has the features.
+                live[g] |= unsafe { refill(&mut group[g], !live[g], staged, &mut pos) };
+            }
+        }
+        if live.iter().all(|&m| m == 0) {
+            return;
+        }
+        let mut ended = [None, None];
+        for g in 0..GROUPS {
+            if live[g] != 0 {
+                ended[g] = Some(unsafe { step(space, &mut group[g], live[g], c) });
+            }
+        }
+        for g in 0..GROUPS {
+            if let Some(e) = &ended[g] {
+                let done = e.solve | e.escaped;
+                if done != 0 {
+                    unsafe { finish(&group[g], e, rays, solve, record) };
+                    live[g] &= !done;
+                }
+            }
+        }
+    }
+}
+
+/// Lane groups in flight.
+const GROUPS: usize = 2;
+
+/// Hands the lanes that ended to their queues.
+#[inline(always)]
+unsafe fn finish(l: &Lanes, e: &Ended, rays: &mut Rays, solve: &mut Queue, record: &mut Queue) {
+    // SAFETY: called only from `walk_octree`, which runs with the
+    // features these intrinsics need; each array holds LANES values.
+    unsafe {
+        let mut r = [0i64; LANES];
+        let mut t0 = [0.0; LANES];
+        let mut t1 = [0.0; LANES];
+        let mut cell = [[0i64; LANES]; 3];
+        _mm512_storeu_epi64(r.as_mut_ptr(), l.r);
+        _mm512_storeu_pd(t0.as_mut_ptr(), e.t0);
+        _mm512_storeu_pd(t1.as_mut_ptr(), e.t1);
+        for a in 0..3 {
+            _mm512_storeu_epi64(cell[a].as_mut_ptr(), l.cell[a]);
+        }
+        let mut m = e.solve;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let i = r[k] as usize;
+            rays.t[i] = t0[k];
+            rays.seg_end[i] = t1[k];
+            rays.set_cell(i, [cell[0][k], cell[1][k], cell[2][k]]);
+            solve.push(r[k] as u32);
+        }
+        let mut m = e.escaped;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let i = r[k] as usize;
+            rays.fate[i] = Fate::Escaped;
+            record.push(r[k] as u32);
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use bumpalo::Bump;
+    use glam::DVec3;
+
+    use super::super::{OctreeBlocks, walk_interleaved};
+    use super::*;
+    use crate::classify::Method;
+    use crate::phantom::{mix64, uniform};
+    use crate::prepare::Prepared;
+    use crate::render::context::Skip;
+    use crate::scene::Scene;
+    use crate::volume::{SampleType, Volume};
+    use crate::with_field;
+
+    /// A 24³ volume: a ball of radius 7 with scrambled samples inside
+    /// (many small tagged regions) and a smooth ramp outside.
+    fn volume(seed: u64) -> Volume {
+        let n = 24;
+        let c = (n - 1) as f64 / 2.0;
+        let mut s = Vec::with_capacity(n * n * n);
+        for z in 0..n {
+            for y in 0..n {
+                for x in 0..n {
+                    let p = [x, y, z].map(|v| v as f64 - c);
+                    let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
+                    let k = (x + n * (y + n * z)) as u64;
+                    s.push(if r < 7.0 {
+                        (255.0 * uniform(mix64(seed), k)) as f32
+                    } else {
+                        (r * 4.0) as f32
+                    });
+                }
+            }
+        }
+        Volume::new([n; 3], [1.0; 3], SampleType::F32, s).unwrap()
+    }
+
+    fn scene(traversal: &str) -> Scene {
+        let text = "[image]\nwidth = 8\nheight = 8\n\
+            [camera]\nkind = 'perspective'\nposition = [11.5, 11.5, -60.0]\nlook_at = [11.5, 11.5, 11.5]\nup = [0.0, 1.0, 0.0]\nfov_y = 20.0\n\
+            [volume.phantom]\nkind = 'sphere'\nsize = 24\nradius = 6.0\nsigma = 1.0\n\
+            [surface]\nfilter = 'bspline3'\niso = 120.0\nior = 1.5\n\
+            [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
+        let set = vec![format!("render.traversal={traversal}")];
+        Scene::parse(text, std::path::Path::new("test.toml"), &set).unwrap()
+    }
+
+    /// Rays from random points of (and around) the domain in random
+    /// directions — some along axes, with signed zeros, tiny or NaN
+    /// components, diagonals through edges and corners — with random pieces, some already past their end, some
+    /// to step past their cell first. Each walk runs until every ray has
+    /// escaped, re-entering after each candidate cell as after a solve
+    /// that found nothing; both walks must hand every ray the same cells
+    /// and segment bits, and count the same visits and sub-cell skips.
+    #[test]
+    fn every_ray_walks_as_in_the_scalar_walk() {
+        if !available() {
+            return;
+        }
+        let odd = [0.0, -0.0, 1e-300, -1e-300, f64::NAN];
+        for (traversal, method, seed) in [
+            ("octree", Method::Bezier(2), 1),
+            ("octree", Method::Accc, 2),
+            ("dda", Method::Bezier(2), 3),
+            ("octree", Method::Bmcc, 4),
+        ] {
+            let sc = scene(traversal);
+            let prep = Prepared::new(Arc::new(volume(seed)), sc.surface.filter)
+                .with_accel(sc.surface.iso, method);
+            with_field!(&prep.field, f => {
+                let ctx = Ctx::new(&sc, &prep, f.as_ref());
+                let Skip::Octree { tree, leaf_level } = &ctx.skip else {
+                    panic!("{traversal} walks the octree");
+                };
+                assert!(fits(&ctx, tree), "{traversal} {method:?}");
+                assert_eq!(ctx.masks.is_some(), matches!(method, Method::Bezier(_)));
+                let bump = Bump::new();
+                let n = 3000;
+                let mut rays = Rays::with_capacity_in(n, false, &bump);
+                let u = |k: u64, j: u64| uniform(mix64(seed * 100_003 + k), j);
+                for k in 0..n as u64 {
+                    let o = DVec3::new(u(k, 0), u(k, 1), u(k, 2)) * 26.0 - DVec3::splat(1.0);
+                    let mut d: [f64; 3] = std::array::from_fn(|a| 2.0 * u(k, 3 + a as u64) - 1.0);
+                    if k.is_multiple_of(7) {
+                        let a = (k / 7 % 3) as usize;
+                        d[a] = odd[(k / 21) as usize % odd.len()];
+                    }
+                    if k.is_multiple_of(11) {
+                        d = [0.0, 0.0, 0.0].map(|_| 0.0);
+                        d[(k / 11 % 3) as usize] = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
+                    }
+                    // Through edges and corners: from cell centres along
+                    // diagonals, where exit times tie exactly.
+                    let o = if k.is_multiple_of(13) {
+                        d = [0, 1, 2].map(|a| if u(k, 9 + a) < 0.5 { -1.0 } else { 1.0 });
+                        if k.is_multiple_of(26) {
+                            d[2] = 0.5;
+                        }
+                        o.floor() + DVec3::splat(0.5)
+                    } else {
+                        o
+                    };
+                    rays.push((k as u32, k as u32), 1.0, true, o, DVec3::from_array(d));
+                }
+                rays.complete();
+                let mut c = Counters::default();
+                for i in 0..n {
+                    let k = i as u64;
+                    let t_end = 40.0 * u(k, 6) - 2.0;
+                    super::super::super::place::<4, _>(&ctx, &mut rays, i, (0.0, 0.0), t_end, &mut c);
+                    rays.advance[i] = k.is_multiple_of(5);
+                }
+                let mut input: Vec<u32> = (0..n as u32).collect();
+                let (mut solved, mut rounds) = (0, 0);
+                while !input.is_empty() {
+                    rounds += 1;
+                    let mut a = rays.clone();
+                    let mut b = rays.clone();
+                    let (mut sa, mut ra) = (Queue::new_in(&bump), Queue::new_in(&bump));
+                    let (mut sb, mut rb) = (Queue::new_in(&bump), Queue::new_in(&bump));
+                    let (mut ca, mut cb) = (Counters::default(), Counters::default());
+                    let octree = OctreeBlocks { tree, leaf_level: *leaf_level };
+                    walk_interleaved(&ctx, octree, &mut a, &input, &mut sa, &mut ra, &mut ca);
+                    // SAFETY: `fits` holds.
+                    unsafe { walk_octree(&ctx, (tree, *leaf_level), &mut b, &input, &mut sb, &mut rb, &mut cb) };
+                    let sorted = |q: &Queue| {
+                        let mut v = q.to_vec();
+                        v.sort_unstable();
+                        v
+                    };
+                    assert_eq!(sorted(&sa), sorted(&sb), "{traversal} {method:?} round {rounds}");
+                    assert_eq!(sorted(&ra), sorted(&rb), "{traversal} {method:?} round {rounds}");
+                    assert_eq!(
+                        (ca.cells_visited, ca.subcell_skips),
+                        (cb.cells_visited, cb.subcell_skips)
+                    );
+                    for &r in &input {
+                        let i = r as usize;
+                        let bits = |x: &Rays| {
+                            (x.t[i].to_bits(), x.seg_end[i].to_bits(), x.cell_of(i), x.fate[i], x.advance[i])
+                        };
+                        assert_eq!(bits(&a), bits(&b), "ray {i} round {rounds}");
+                    }
+                    solved += sa.len();
+                    rays = b;
+                    for &r in sb.iter() {
+                        rays.advance[r as usize] = true;
+                    }
+                    input = sb.to_vec();
+                }
+                assert!(solved > 2000 && rounds > 3, "{traversal} {method:?}: {solved} solves in {rounds} rounds");
+            });
+        }
+    }
+
+    #[test]
+    fn spans_are_the_table_of_the_scalar_walk() {
+        if !available() {
+            return;
+        }
+        for a in 0..3 {
+            for lo in 0..SUB {
+                for hi in lo..SUB {
+                    // SAFETY: `available` checked the features.
+                    let got = unsafe { span_of(a, lo, hi) };
+                    assert_eq!(
+                        got,
+                        super::super::AXIS_SPAN[a][lo][hi],
+                        "axis {a} {lo}..={hi}"
+                    );
+                }
+            }
+        }
+    }
+
+    #[target_feature(enable = "avx512f,avx512dq")]
+    fn span_of(a: usize, lo: usize, hi: usize) -> u64 {
+        let (rep, log) = SPAN_ROWS[a];
+        // SAFETY: this function has the features.
+        let v = unsafe {
+            axis_span(
+                rep,
+                log,
+                _mm512_set1_epi64(lo as i64),
+                _mm512_set1_epi64(hi as i64),
+            )
+        };
+        let mut out = [0i64; LANES];
+        // SAFETY: `out` holds LANES values.
+        unsafe { _mm512_storeu_epi64(out.as_mut_ptr(), v) };
+        out[0] as u64
+    }
+}
