@@ -7,7 +7,7 @@
 //! test, and the exit from the cell or block, with branches the hardware
 //! cannot predict. Here eight walks step together: each of those
 //! operations is one vector instruction for all eight lanes, the loads are
-//! gathers, and every per-lane choice is a mask — about 50 instructions
+//! gathers, and every per-lane choice is a mask — 50–70 instructions
 //! per visit. A lane whose walk ends, at a candidate cell (to the solve
 //! queue) or out of its piece (to the record queue), is refilled with the
 //! next ray at once; two groups of lanes step in turn, so one group's
