@@ -392,9 +392,11 @@ unsafe fn step(s: &Space, l: &mut Lanes, live: __mmask8, c: &mut Counters) -> En
                 Some((words, rank, masks)) => {
                     let brick = _mm512_srli_epi64::<6>(slot);
                     let bit = _mm512_and_si512(slot, _mm512_set1_epi64(63));
-                    // The index's words are gathered with the skip bytes, not
-                    // after them (a cell with its bit set is a tagged cell), so
-                    // the mask's gather waits for one gather, not two.
+                    // The index's words are gathered for every lane in the
+                    // lattice, not just the tagged ones (a cell with its bit
+                    // set is a tagged cell): under the predicted branch the
+                    // gather starts alongside the skip bytes', and the
+                    // mask's gather waits for one gather, not two.
                     // SAFETY (the three gathers): a lattice cell's brick has a
                     // word and a rank; a tagged cell's rank plus the tags before
                     // it in its brick is its slot, below the tag count.
