@@ -600,7 +600,7 @@ unsafe fn walk<T: Coefficient>(
         if live.iter().all(|&m| m == 0) {
             return;
         }
-        let mut ended = [None, None];
+        let mut ended: [Option<Ended>; GROUPS] = std::array::from_fn(|_| None);
         for g in 0..GROUPS {
             if live[g] != 0 {
                 ended[g] = Some(unsafe { step(space, &mut group[g], live[g], c) });
