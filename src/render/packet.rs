@@ -23,7 +23,8 @@ pub enum Fate {
 }
 
 /// The rays of a tile, one entry per ray in every array.
-#[derive(Clone)]
+/// (`Clone` only for tests that run two walks over the same rays.)
+#[cfg_attr(test, derive(Clone))]
 pub struct Rays<'a> {
     /// Image pixel index `y * width + x`.
     pub pixel: BVec<'a, u32>,

@@ -441,6 +441,25 @@ fn walk_bound<T: Coefficient>(
 /// ray and the cell alone, so it is the same bits however the walk got
 /// here), or `None` when it provably meets none of the cell's tagged
 /// sub-cells.
+/// Where ray `i`'s walk starts: its piece in cell coordinates, its cell
+/// and parameter, stepped past the cell first when `advance` is set (which
+/// is cleared). Shared by the interleaved walk and the lane walk's staging.
+#[inline(always)]
+pub(crate) fn walk_start<T: Coefficient>(
+    ctx: &Ctx<T>,
+    rays: &mut Rays,
+    i: usize,
+) -> (CellRay, [i64; 3], f64) {
+    let ray = cell_ray(ctx, rays, i);
+    let mut cell = rays.cell_of(i);
+    let mut t = rays.t[i];
+    if rays.advance[i] {
+        rays.advance[i] = false;
+        (t, cell) = exit_cell(&ray, cell, t);
+    }
+    (ray, cell, t)
+}
+
 #[inline(always)]
 fn tagged_segment<T: Coefficient>(
     ctx: &Ctx<T>,
@@ -606,13 +625,7 @@ impl<L: Copy> Walk<L> {
         r: u32,
     ) -> Walk<L> {
         let i = r as usize;
-        let ray = cell_ray(ctx, rays, i);
-        let mut cell = rays.cell_of(i);
-        let mut t = rays.t[i];
-        if rays.advance[i] {
-            rays.advance[i] = false;
-            (t, cell) = exit_cell(&ray, cell, t);
-        }
+        let (ray, cell, t) = walk_start(ctx, rays, i);
         Walk {
             r,
             ray,
