@@ -42,8 +42,10 @@ pub struct Proximity {
 #[derive(Clone, Debug)]
 enum Reach {
     /// Per octant (bit `a` set: negative direction along axis `a`), the edge
-    /// of the empty cube anchored at each cell reaching ahead.
-    Octants(Vec<Vec<u8>>),
+    /// of the empty cube anchored at each cell reaching ahead: the eight
+    /// maps one after another in one allocation, so the lane walk reaches
+    /// each lane's octant by an offset from one base.
+    Octants(Vec<u8>),
     /// Chessboard distance to the nearest tagged cell: the cube of radius
     /// `d - 1` centred on the cell is empty.
     Centred(Vec<u8>),
@@ -67,14 +69,15 @@ impl Proximity {
     pub fn build_within(tags: &Tags, budget: usize) -> Proximity {
         let bricked = Bricked::new(tags.cells);
         let reach = if 8 * bricked.len() <= budget {
-            Reach::Octants(
-                (0..8usize)
-                    .into_par_iter()
-                    .map(|o| to_bricked(tags.cells, &octant_map(tags, o)))
-                    .collect(),
-            )
+            let mut maps = vec![0u8; 8 * bricked.len()];
+            maps.par_chunks_mut(bricked.len())
+                .enumerate()
+                .for_each(|(o, map)| to_bricked(tags.cells, &octant_map(tags, o), map));
+            Reach::Octants(maps)
         } else {
-            Reach::Centred(to_bricked(tags.cells, &centred_map(tags)))
+            let mut map = vec![0u8; bricked.len()];
+            to_bricked(tags.cells, &centred_map(tags), &mut map);
+            Reach::Centred(map)
         };
         Proximity {
             cells: tags.cells,
@@ -94,7 +97,10 @@ impl Proximity {
     #[inline(always)]
     pub fn map_for(&self, octant: usize) -> ReachMap<'_> {
         let (bytes, centred) = match &self.reach {
-            Reach::Octants(maps) => (&maps[octant][..], false),
+            Reach::Octants(maps) => (
+                &maps[octant * self.bricked.len()..][..self.bricked.len()],
+                false,
+            ),
             Reach::Centred(map) => (&map[..], true),
         };
         ReachMap {
@@ -109,9 +115,16 @@ impl Proximity {
     }
 
     pub fn bytes(&self) -> usize {
+        self.lane_maps().0.len()
+    }
+
+    /// For the lane walk: every map's bytes, the distance from one octant's
+    /// map to the next (0 for the single centred map), whether the cubes
+    /// are centred, and the bricked layout they share.
+    pub fn lane_maps(&self) -> (&[u8], usize, bool, Bricked) {
         match &self.reach {
-            Reach::Octants(maps) => maps.iter().map(Vec::len).sum(),
-            Reach::Centred(map) => map.len(),
+            Reach::Octants(maps) => (maps, self.bricked.len(), false, self.bricked),
+            Reach::Centred(map) => (map, 0, true, self.bricked),
         }
     }
 }
@@ -139,12 +152,12 @@ impl ReachMap<'_> {
     }
 }
 
-/// An x-fastest map in the bricked layout: a brick's rows of 4 cells are
-/// contiguous in both, so rows move 4 bytes at a time.
-fn to_bricked(cells: [usize; 3], linear: &[u8]) -> Vec<u8> {
+/// An x-fastest map into `out` in the bricked layout: a brick's rows of 4
+/// cells are contiguous in both, so rows move 4 bytes at a time.
+fn to_bricked(cells: [usize; 3], linear: &[u8], out: &mut [u8]) {
     let bricked = Bricked::new(cells);
     let [nx, ny, nz] = cells;
-    let mut out = vec![0u8; bricked.len()];
+    debug_assert_eq!(out.len(), bricked.len());
     for z in 0..nz {
         for y in 0..ny {
             let row = &linear[nx * (y + ny * z)..][..nx];
@@ -154,7 +167,6 @@ fn to_bricked(cells: [usize; 3], linear: &[u8]) -> Vec<u8> {
             }
         }
     }
-    out
 }
 
 /// The octant map for octant `o`, x-fastest.

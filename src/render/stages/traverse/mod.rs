@@ -5,7 +5,13 @@
 //! - `dda`, `octree`: walk the knot-cell lattice (Amanatides–Woo), skipping every
 //!   cell (or aligned block of cells) that provably holds no crossing, and stop
 //!   at the first candidate cell. Skipping a block is one step: the ray jumps to
-//!   where it leaves the block, so the DDA is the octree with a single level.
+//!   where it leaves the block, so the DDA is the octree with a single level;
+//! - `distance`: the same walk over the distance field's empty cubes
+//!   ([`crate::octree::distance`]), which reach further than aligned blocks.
+//!
+//! With AVX-512 every cell walk runs eight rays at a time ([`wide`]); the
+//! scalar walks below are the reference it is tested against, and the path
+//! on other CPUs.
 
 #[cfg(target_arch = "x86_64")]
 pub mod wide;
@@ -53,6 +59,13 @@ pub fn traverse<const S: usize, T: Coefficient>(
                 crate::with_isa!(crate::simd::Isa::current(), _L, _M => walk_interleaved(ctx, octree, rays, input, solve, record, c));
             }
             Skip::Distance(p) => {
+                #[cfg(target_arch = "x86_64")]
+                if wide::fits_distance(ctx, p) {
+                    // SAFETY: `fits_distance` checked the CPU's features and
+                    // the maps.
+                    unsafe { wide::walk_distance(ctx, p, rays, input, solve, record, c) };
+                    return;
+                }
                 crate::with_isa!(crate::simd::Isa::current(), _L, _M => walk_interleaved(ctx, DistanceCubes::new(p), rays, input, solve, record, c));
             }
             Skip::Bound(b) => {
