@@ -456,7 +456,8 @@ fn walk_bound<T: Coefficient>(
 /// sub-cells.
 /// Where ray `i`'s walk starts: its piece in cell coordinates, its cell
 /// and parameter, stepped past the cell first when `advance` is set (which
-/// is cleared). Shared by the interleaved walk and the lane walk's staging.
+/// is cleared): how the interleaved walk starts a ray (the lane walk
+/// stages its rays the same way in lanes).
 #[inline(always)]
 pub(crate) fn walk_start<T: Coefficient>(
     ctx: &Ctx<T>,
