@@ -194,19 +194,17 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
         let mut missed = [false; N];
         for a in 0..3 {
             let (lo, hi) = (self.active[0][a], self.active[1][a]);
-            // Selects, not a branch per lane, so the lanes stay in vectors
-            // (the branch kept them scalar: a quarter of the refract
-            // stage's own time). An axis the ray does not move along leaves
-            // its lane's interval as it was; its division is not used.
             for l in 0..N {
                 let (o, d) = (o[a][l], d[a][l]);
-                let flat = d == 0.0;
-                missed[l] |= flat & (o < lo || o > hi);
+                if d == 0.0 {
+                    missed[l] |= o < lo || o > hi;
+                    continue;
+                }
                 let inv = 1.0 / d;
                 let (ta, tb) = ((lo - o) * inv, (hi - o) * inv);
                 let (ta, tb) = if ta > tb { (tb, ta) } else { (ta, tb) };
-                t0[l] = if flat { t0[l] } else { t0[l].max(ta) };
-                t1[l] = if flat { t1[l] } else { t1[l].min(tb) };
+                t0[l] = t0[l].max(ta);
+                t1[l] = t1[l].min(tb);
             }
         }
         std::array::from_fn(|l| {
