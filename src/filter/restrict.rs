@@ -127,9 +127,10 @@ impl<T: Coefficient> Field<T> {
     }
 
     /// [`Field::restrict`] for `L` segments at once: monomial coefficients of
-    /// `g(s) - iso` per lane, `out[m][lane]`. Every lane does the same
-    /// arithmetic, so the loops over lanes vectorize; `M` fuses the
-    /// multiply-adds where the instruction set can.
+    /// `g(s) - iso` per lane, `out[m][lane]` for `m ≤ 3(S-1)`; the rows
+    /// above may be left as they were (callers reusing `out` keep them zero).
+    /// Every lane does the same arithmetic, so the loops over lanes
+    /// vectorize; `M` fuses the multiply-adds where the instruction set can.
     #[inline(always)]
     pub fn restrict_lanes<const S: usize, const L: usize, M: Madd>(
         &self,
@@ -154,7 +155,9 @@ impl<T: Coefficient> Field<T> {
             };
             let mut base = [0usize; 8];
             base.copy_from_slice(&seg.base);
-            let mut g = [[0.0f64; 8]; N];
+            // Degree 9: ten rows (the caller's rows above stay as they are,
+            // zero).
+            let mut g = [[0.0f64; 8]; 10];
             // SAFETY: AVX-512 and FMA checked above; every row lies in
             // `base + span <= data.len()` (asserted by `lane_rows`).
             unsafe {
