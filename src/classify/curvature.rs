@@ -82,6 +82,12 @@ impl CurvatureBounds {
     pub fn at(&self, slot: usize) -> &HessianBound {
         &self.bounds[slot]
     }
+
+    /// The tagged-cell index and the bounds in its slot order, for lane
+    /// code that gathers them.
+    pub fn parts(&self) -> (&TaggedIndex, &[HessianBound]) {
+        (&self.index, &self.bounds)
+    }
 }
 
 /// `|dᵀ H d|` bounded over a cell from its [`HessianBound`], for any `d`.

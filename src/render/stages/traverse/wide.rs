@@ -187,17 +187,18 @@ impl Staged {
     }
 }
 
-/// Eight walks in registers.
+/// Eight walks in registers (also the refract stage's lane clearing,
+/// which steps cells as a walk does).
 #[derive(Clone, Copy)]
-struct Lanes {
-    r: __m512i,
-    ou: [__m512d; 3],
-    du: [__m512d; 3],
-    inv: [__m512d; 3],
-    cell: [__m512i; 3],
-    t: __m512d,
-    t_start: __m512d,
-    t_end: __m512d,
+pub(crate) struct Lanes {
+    pub r: __m512i,
+    pub ou: [__m512d; 3],
+    pub du: [__m512d; 3],
+    pub inv: [__m512d; 3],
+    pub cell: [__m512i; 3],
+    pub t: __m512d,
+    pub t_start: __m512d,
+    pub t_end: __m512d,
 }
 
 /// What the walk reads, as vectors and base pointers.
@@ -341,18 +342,24 @@ impl LaneReach for Cubes<'_> {
 /// `(x & 3)` and friends: the bricked slot of each lane's cell.
 #[inline(always)]
 unsafe fn brick_slot<R>(s: &Space<R>, cell: &[__m512i; 3]) -> __m512i {
-    // SAFETY: called only from `walk_octree`, which runs with the
-    // features these intrinsics need; memory accesses are marked below.
+    // SAFETY: called only from the walk, which runs with the features.
+    unsafe { bricked_index(&s.bricks, cell) }
+}
+
+/// [`Bricked::index`] per lane, with `bricks` its bricks along x and y.
+#[inline(always)]
+pub(crate) unsafe fn bricked_index(bricks: &[__m512i; 2], cell: &[__m512i; 3]) -> __m512i {
+    // SAFETY: called only from functions with AVX-512 F and DQ.
     unsafe {
         let [x, y, z] = *cell;
         let three = _mm512_set1_epi64(3);
         let brick = _mm512_add_epi64(
             _mm512_srli_epi64::<2>(x),
             _mm512_mullo_epi64(
-                s.bricks[0],
+                bricks[0],
                 _mm512_add_epi64(
                     _mm512_srli_epi64::<2>(y),
-                    _mm512_mullo_epi64(s.bricks[1], _mm512_srli_epi64::<2>(z)),
+                    _mm512_mullo_epi64(bricks[1], _mm512_srli_epi64::<2>(z)),
                 ),
             ),
         );
@@ -364,6 +371,43 @@ unsafe fn brick_slot<R>(s: &Space<R>, cell: &[__m512i; 3]) -> __m512i {
             ),
         );
         _mm512_or_si512(_mm512_slli_epi64::<6>(brick), within)
+    }
+}
+
+/// [`crate::classify::tagged::TaggedIndex::slot`] per lane of `go`, from
+/// the index's words and ranks and each lane's bricked index `at`: the
+/// lanes whose cell is tagged, and their slots.
+///
+/// # Safety
+/// AVX-512 F, DQ and VPOPCNTDQ; every lane of `go` indexes a cell of the
+/// index's lattice.
+#[inline(always)]
+pub(crate) unsafe fn tagged_slot(
+    (words, rank): (&[u64], &[u32]),
+    at: __m512i,
+    go: __mmask8,
+) -> (__mmask8, __m512i) {
+    // SAFETY: as the caller guarantees; a lattice cell's brick has a word
+    // and a rank.
+    unsafe {
+        let one = _mm512_set1_epi64(1);
+        let brick = _mm512_srli_epi64::<6>(at);
+        let bit = _mm512_and_si512(at, _mm512_set1_epi64(63));
+        let word = _mm512_mask_i64gather_epi64::<8>(
+            _mm512_setzero_si512(),
+            go,
+            brick,
+            words.as_ptr() as *const i64,
+        );
+        let has = _mm512_mask_test_epi64_mask(go, _mm512_srlv_epi64(word, bit), one);
+        let before = _mm512_cvtepu32_epi64(_mm512_mask_i64gather_epi32::<4>(
+            _mm256_setzero_si256(),
+            go,
+            brick,
+            rank.as_ptr() as *const i32,
+        ));
+        let below = _mm512_and_si512(word, _mm512_sub_epi64(_mm512_sllv_epi64(one, bit), one));
+        (has, _mm512_add_epi64(before, _mm512_popcnt_epi64(below)))
     }
 }
 
@@ -491,7 +535,11 @@ unsafe fn exit_block(l: &Lanes, level: __m512i) -> (__m512d, [__m512i; 3]) {
 /// [`super::exit_box`] per lane: where each lane leaves its box `lo ..= hi`
 /// (which holds its cell), not before its `t`, and the cell it enters.
 #[inline(always)]
-unsafe fn exit_box(l: &Lanes, lo: [__m512i; 3], hi: [__m512i; 3]) -> (__m512d, [__m512i; 3]) {
+pub(crate) unsafe fn exit_box(
+    l: &Lanes,
+    lo: [__m512i; 3],
+    hi: [__m512i; 3],
+) -> (__m512d, [__m512i; 3]) {
     // SAFETY: called only from the walk, which runs with the features
     // these intrinsics need.
     unsafe {
@@ -560,7 +608,6 @@ unsafe fn step<R: LaneReach>(
     // SAFETY: called only from the walk, which runs with the features
     // these intrinsics need; memory accesses are marked below.
     unsafe {
-        let one = _mm512_set1_epi64(1);
         let byte_mask = _mm512_set1_epi64(0xFF);
         let mut inside = _mm512_cmp_pd_mask::<_CMP_NGE_UQ>(l.t, l.t_end);
         for a in 0..3 {
@@ -599,32 +646,15 @@ unsafe fn step<R: LaneReach>(
             let (solve, skipped) = match s.masks {
                 None => (tagged, 0),
                 Some((words, rank, masks)) => {
-                    let brick = _mm512_srli_epi64::<6>(slot);
-                    let bit = _mm512_and_si512(slot, _mm512_set1_epi64(63));
                     // The index's words are gathered for every lane in the
                     // lattice, not just the tagged ones (a cell with its bit
                     // set is a tagged cell): under the predicted branch the
                     // gather starts alongside the skip bytes', and the
                     // mask's gather waits for one gather, not two.
-                    // SAFETY (the three gathers): a lattice cell's brick has a
-                    // word and a rank; a tagged cell's rank plus the tags before
-                    // it in its brick is its slot, below the tag count.
-                    let word = _mm512_mask_i64gather_epi64::<8>(
-                        _mm512_setzero_si512(),
-                        go,
-                        brick,
-                        words.as_ptr() as *const i64,
-                    );
-                    let has = _mm512_mask_test_epi64_mask(go, _mm512_srlv_epi64(word, bit), one);
-                    let before = _mm512_cvtepu32_epi64(_mm512_mask_i64gather_epi32::<4>(
-                        _mm256_setzero_si256(),
-                        go,
-                        brick,
-                        rank.as_ptr() as *const i32,
-                    ));
-                    let below =
-                        _mm512_and_si512(word, _mm512_sub_epi64(_mm512_sllv_epi64(one, bit), one));
-                    let index = _mm512_add_epi64(before, _mm512_popcnt_epi64(below));
+                    // SAFETY (here and the mask's gather): the lanes of `go`
+                    // hold lattice cells; a tagged cell's slot is below the
+                    // tag count, the masks' length.
+                    let (has, index) = tagged_slot((words, rank), slot, go);
                     let mask = _mm512_mask_i64gather_epi64::<8>(
                         _mm512_setzero_si512(),
                         has,
