@@ -97,30 +97,7 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
         if let Some(next) = ahead.next().filter(|_| far) {
             prefetch_rows::<S, T>(ctx, rays, next, data, rows);
         }
-        let mut seg = LaneSegments::<L> {
-            base: [0; L],
-            tau: [[0.0; L]; 3],
-            delta: [[0.0; L]; 3],
-        };
-        let mut span = [(0.0f64, 0.0f64, 0.0f64); L];
-        for l in 0..L {
-            // Short groups repeat their first ray; its lane results are ignored.
-            let i = group[l.min(group.len() - 1)] as usize;
-            let og = ctx.to_grid(rays.origin(i));
-            let dg = ctx.to_grid(rays.direction(i));
-            let cell = rays.cell_of(i);
-            // The traversal's segment: the part of the cell from its first to
-            // its last tagged sub-cell on this ray.
-            let (t0, t1) = (rays.t[i], rays.seg_end[i]);
-            let (p0, p1) = (og + t0 * dg, og + t1 * dg);
-            let (base, ta, de) = ctx.field.lane_segment(cell, p0.to_array(), p1.to_array());
-            seg.base[l] = base;
-            for a in 0..3 {
-                seg.tau[a][l] = ta[a];
-                seg.delta[a][l] = de[a];
-            }
-            span[l] = (t0, t1, dg.length() * (t1 - t0));
-        }
+        let (seg, span) = segments::<L, T>(ctx, rays, group);
         ctx.field
             .restrict_lanes::<S, L, M>(&seg, ctx.iso, &mut mono);
         ctx.basis.bernstein_lanes_into::<L, M>(&mono, &mut bern);
@@ -129,7 +106,7 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
         let mut single = [false; L];
         for (l, &r) in group.iter().enumerate() {
             let i = r as usize;
-            if span[l].2 > 1e-13 {
+            if span.len[l] > 1e-13 {
                 if !rays.side_known[i] {
                     set_side::<S, _>(ctx, rays, i, c);
                 }
@@ -143,7 +120,7 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
         };
         for (l, &r) in group.iter().enumerate() {
             let i = r as usize;
-            let (t0, t1, len) = span[l];
+            let (t0, t1, len) = (span.t0[l], span.t1[l], span.len[l]);
             c.cells_solved += 1;
             let mut hit = None;
             if single[l] {
@@ -176,6 +153,155 @@ fn solve_cells<const S: usize, const L: usize, M: Madd, T: Coefficient>(
                 }
             }
         }
+    }
+}
+
+/// Each lane's segment ends and length (world units along the ray).
+struct Spans<const L: usize> {
+    t0: [f64; L],
+    t1: [f64; L],
+    len: [f64; L],
+}
+
+/// The segments of `group` (at most `L` rays) in lanes: each ray's segment
+/// from the traversal (`t` to `seg_end` in its cell) in the cell's local
+/// coordinates ([`Field::lane_segment`]), and its ends and length. Short
+/// groups repeat their last ray; its lane results are ignored.
+///
+/// [`Field::lane_segment`]: crate::filter::Field::lane_segment
+#[inline(always)]
+fn segments<const L: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
+    rays: &Rays,
+    group: &[u32],
+) -> (LaneSegments<L>, Spans<L>) {
+    #[cfg(target_arch = "x86_64")]
+    if L == 8 && Isa::current() == Isa::Avx512 {
+        let mut idx = [0u32; 8];
+        for (l, v) in idx.iter_mut().enumerate() {
+            *v = group[l.min(group.len() - 1)];
+        }
+        let (mut seg, mut span) = empty_segments::<L>();
+        // SAFETY: AVX-512 checked above; every index is a ray's.
+        let (base, tau, delta, t0, t1, len) = unsafe { segments_x8(ctx, rays, &idx) };
+        seg.base.copy_from_slice(&base);
+        for a in 0..3 {
+            seg.tau[a].copy_from_slice(&tau[a]);
+            seg.delta[a].copy_from_slice(&delta[a]);
+        }
+        span.t0.copy_from_slice(&t0);
+        span.t1.copy_from_slice(&t1);
+        span.len.copy_from_slice(&len);
+        return (seg, span);
+    }
+    segments_scalar(ctx, rays, group)
+}
+
+#[inline(always)]
+fn empty_segments<const L: usize>() -> (LaneSegments<L>, Spans<L>) {
+    (
+        LaneSegments::<L> {
+            base: [0; L],
+            tau: [[0.0; L]; 3],
+            delta: [[0.0; L]; 3],
+        },
+        Spans {
+            t0: [0.0; L],
+            t1: [0.0; L],
+            len: [0.0; L],
+        },
+    )
+}
+
+/// [`segments`] one ray at a time (any instruction set).
+#[inline(always)]
+fn segments_scalar<const L: usize, T: Coefficient>(
+    ctx: &Ctx<T>,
+    rays: &Rays,
+    group: &[u32],
+) -> (LaneSegments<L>, Spans<L>) {
+    let (mut seg, mut span) = empty_segments::<L>();
+    for l in 0..L {
+        let i = group[l.min(group.len() - 1)] as usize;
+        let og = ctx.to_grid(rays.origin(i));
+        let dg = ctx.to_grid(rays.direction(i));
+        let cell = rays.cell_of(i);
+        // The traversal's segment: the part of the cell from its first to
+        // its last tagged sub-cell on this ray.
+        let (t0, t1) = (rays.t[i], rays.seg_end[i]);
+        let (p0, p1) = (og + t0 * dg, og + t1 * dg);
+        let (base, ta, de) = ctx.field.lane_segment(cell, p0.to_array(), p1.to_array());
+        seg.base[l] = base;
+        for a in 0..3 {
+            seg.tau[a][l] = ta[a];
+            seg.delta[a][l] = de[a];
+        }
+        (span.t0[l], span.t1[l], span.len[l]) = (t0, t1, dg.length() * (t1 - t0));
+    }
+    (seg, span)
+}
+
+/// The scalar loop of [`segments`] for eight rays in AVX-512 lanes, its
+/// operations in the same order (no fused multiply-adds), so the same
+/// bits: the ray columns gathered by index, the neighbourhood offset from
+/// the one of cell 0 (it is affine in the cell).
+///
+/// # Safety
+/// AVX-512 F, VL and DQ; every index is below the rays' count.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,avx512vl,avx512dq")]
+#[allow(clippy::type_complexity)]
+unsafe fn segments_x8<T: Coefficient>(
+    ctx: &Ctx<T>,
+    rays: &Rays,
+    idx: &[u32; 8],
+) -> (
+    [usize; 8],
+    [[f64; 8]; 3],
+    [[f64; 8]; 3],
+    [f64; 8],
+    [f64; 8],
+    [f64; 8],
+) {
+    use std::arch::x86_64::*;
+    let coeffs = ctx.field.coeffs();
+    let strides = [1, coeffs.stride(1), coeffs.stride(2)];
+    let origin = ctx.field.support_offset([0, 0, 0]);
+    let off = _mm512_set1_pd(ctx.field.kernel().knot_offset());
+    // SAFETY: the caller's contract; each array holds 8 values.
+    unsafe {
+        let r = _mm512_cvtepu32_epi64(_mm256_loadu_epi32(idx.as_ptr() as *const i32));
+        let pd = |col: &[f64]| _mm512_i64gather_pd::<8>(r, col.as_ptr());
+        let (t0, t1) = (pd(&rays.t), pd(&rays.seg_end));
+        let mut base = _mm512_set1_epi64(origin as i64);
+        let mut len2 = _mm512_setzero_pd();
+        let mut tau = [[0.0; 8]; 3];
+        let mut delta = [[0.0; 8]; 3];
+        for a in 0..3 {
+            let s = _mm512_set1_pd(ctx.inv_spacing[a]);
+            let og = _mm512_mul_pd(pd(&rays.org[a]), s);
+            let dg = _mm512_mul_pd(pd(&rays.dir[a]), s);
+            let cell = _mm512_cvtepi32_epi64(_mm512_i64gather_epi32::<4>(r, rays.cell[a].as_ptr()));
+            let p0 = _mm512_add_pd(og, _mm512_mul_pd(t0, dg));
+            let p1 = _mm512_add_pd(og, _mm512_mul_pd(t1, dg));
+            let ta = _mm512_sub_pd(_mm512_add_pd(p0, off), _mm512_cvtepi64_pd(cell));
+            _mm512_storeu_pd(tau[a].as_mut_ptr(), ta);
+            _mm512_storeu_pd(delta[a].as_mut_ptr(), _mm512_sub_pd(p1, p0));
+            base = _mm512_add_epi64(
+                base,
+                _mm512_mullo_epi64(cell, _mm512_set1_epi64(strides[a] as i64)),
+            );
+            // `dg.length()`: x² + y², then + z².
+            let sq = _mm512_mul_pd(dg, dg);
+            len2 = if a == 0 { sq } else { _mm512_add_pd(len2, sq) };
+        }
+        let len = _mm512_mul_pd(_mm512_sqrt_pd(len2), _mm512_sub_pd(t1, t0));
+        let mut out = ([0usize; 8], tau, delta, [0.0; 8], [0.0; 8], [0.0; 8]);
+        _mm512_storeu_epi64(out.0.as_mut_ptr() as *mut i64, base);
+        _mm512_storeu_pd(out.3.as_mut_ptr(), t0);
+        _mm512_storeu_pd(out.4.as_mut_ptr(), t1);
+        _mm512_storeu_pd(out.5.as_mut_ptr(), len);
+        out
     }
 }
 
@@ -245,5 +371,88 @@ fn solve_bracket<const S: usize, T: Coefficient>(
         rays.t[i] = tb;
         rays.seg_g[0][i] = gb;
         traverse.push(r);
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Arc;
+
+    use bumpalo::Bump;
+    use glam::DVec3;
+
+    use super::*;
+    use crate::classify::Method;
+    use crate::phantom::{mix64, uniform};
+    use crate::prepare::Prepared;
+    use crate::scene::Scene;
+    use crate::with_field;
+
+    /// The lane setup of the segments gives bitwise what the scalar loop
+    /// gives: offsets, local coordinates, extents, ends and lengths, for
+    /// full and short groups, rays along axes included, on a grid with
+    /// anisotropic spacing.
+    #[test]
+    fn lane_segments_are_the_scalar_ones() {
+        if Isa::current() != Isa::Avx512 {
+            return;
+        }
+        let text = "[image]\nwidth = 8\nheight = 8\n\
+            [camera]\nkind = 'perspective'\nposition = [11.5, 11.5, -60.0]\nlook_at = [11.5, 11.5, 11.5]\nup = [0.0, 1.0, 0.0]\nfov_y = 20.0\n\
+            [volume.phantom]\nkind = 'sphere'\nsize = 24\nradius = 6.0\nsigma = 1.0\n\
+            [surface]\nfilter = 'bspline3'\niso = 127.5\nior = 1.5\n\
+            [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
+        let sc = Scene::parse(text, std::path::Path::new("test.toml"), &[]).unwrap();
+        let m = 24;
+        let samples = (0..m * m * m)
+            .map(|k| {
+                let p = [k % m, k / m % m, k / (m * m)].map(|v| v as f64 - 11.5);
+                (255.0 - 20.0 * (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()) as f32
+            })
+            .collect();
+        let volume = crate::volume::Volume::new(
+            [m; 3],
+            [1.0, 0.7, 1.3],
+            crate::volume::SampleType::F32,
+            samples,
+        )
+        .unwrap();
+        let prep = Prepared::new(Arc::new(volume), sc.surface.filter)
+            .with_accel(sc.surface.iso, Method::Bezier(2));
+        with_field!(&prep.field, f => {
+            let ctx = Ctx::new(&sc, &prep, f.as_ref());
+            let bump = Bump::new();
+            let n = 1003;
+            let mut rays = Rays::with_capacity_in(n, false, &bump);
+            let u = |k: u64, j: u64| uniform(mix64(k), j);
+            for k in 0..n as u64 {
+                let o = DVec3::new(u(k, 0) * 23.0, u(k, 1) * 16.0, u(k, 2) * 29.0);
+                let mut d = DVec3::new(u(k, 3), u(k, 4), u(k, 5)) * 2.0 - DVec3::ONE;
+                if k.is_multiple_of(5) {
+                    d[(k / 5 % 3) as usize] = 0.0;
+                }
+                rays.push((k as u32, k as u32), 1.0, true, o, d.normalize());
+            }
+            rays.complete();
+            let mut c = Counters::default();
+            for i in 0..n {
+                super::super::place::<4, _>(&ctx, &mut rays, i, (1e-3, 1e-3), 40.0, &mut c);
+                rays.seg_end[i] = rays.t[i] + 1.7 * u(i as u64, 6);
+            }
+            let input: Vec<u32> = (0..n as u32).collect();
+            for group in input.chunks(8) {
+                let (sa, pa) = segments::<8, _>(&ctx, &rays, group);
+                let (sb, pb) = segments_scalar::<8, _>(&ctx, &rays, group);
+                let bits = |v: &[f64; 8]| v.map(f64::to_bits);
+                assert_eq!(sa.base, sb.base);
+                for a in 0..3 {
+                    assert_eq!(bits(&sa.tau[a]), bits(&sb.tau[a]));
+                    assert_eq!(bits(&sa.delta[a]), bits(&sb.delta[a]));
+                }
+                assert_eq!(bits(&pa.t0), bits(&pb.t0));
+                assert_eq!(bits(&pa.t1), bits(&pb.t1));
+                assert_eq!(bits(&pa.len), bits(&pb.len));
+            }
+        });
     }
 }
