@@ -450,10 +450,6 @@ fn walk_bound<T: Coefficient>(
     }
 }
 
-/// The segment of the ray's piece inside tagged `cell` to solve (from the
-/// ray and the cell alone, so it is the same bits however the walk got
-/// here), or `None` when it provably meets none of the cell's tagged
-/// sub-cells.
 /// Where ray `i`'s walk starts: its piece in cell coordinates, its cell
 /// and parameter, stepped past the cell first when `advance` is set (which
 /// is cleared): how the interleaved walk starts a ray (the lane walk
@@ -474,6 +470,10 @@ pub(crate) fn walk_start<T: Coefficient>(
     (ray, cell, t)
 }
 
+/// The segment of the ray's piece inside tagged `cell` to solve (from the
+/// ray and the cell alone, so it is the same bits however the walk got
+/// here), or `None` when it provably meets none of the cell's tagged
+/// sub-cells.
 #[inline(always)]
 fn tagged_segment<T: Coefficient>(
     ctx: &Ctx<T>,
