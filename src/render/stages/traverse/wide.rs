@@ -514,21 +514,32 @@ unsafe fn tagged_segment(l: &Lanes) -> (__m512d, __m512d) {
     }
 }
 
-/// [`super::exit_block`] per lane, with per-lane levels (0: the cell).
+/// [`super::exit_block`] per lane, with per-lane levels (0: the cell): the
+/// block's bounds and its walls' times in one pass over the axes, then the
+/// exit as [`exit_box`] takes it ([`exit_from`]).
 #[inline(always)]
 unsafe fn exit_block(l: &Lanes, level: __m512i) -> (__m512d, [__m512i; 3]) {
     // SAFETY: called only from the walk, which runs with the features
     // these intrinsics need.
     unsafe {
         let one = _mm512_set1_epi64(1);
+        let zero = _mm512_setzero_pd();
         let size = _mm512_sllv_epi64(one, level);
         let mut lo = [_mm512_setzero_si512(); 3];
         let mut hi = [_mm512_setzero_si512(); 3];
+        let mut te = [_mm512_setzero_pd(); 3];
+        let mut pos = [0u8; 3];
+        let mut neg = [0u8; 3];
         for a in 0..3 {
             lo[a] = _mm512_sllv_epi64(_mm512_srav_epi64(l.cell[a], level), level);
             hi[a] = _mm512_sub_epi64(_mm512_add_epi64(lo[a], size), one);
+            pos[a] = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(l.du[a], zero);
+            neg[a] = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(l.du[a], zero);
+            let wall = _mm512_mask_mov_epi64(lo[a], pos[a], _mm512_add_epi64(hi[a], one));
+            let tw = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi64_pd(wall), l.ou[a]), l.inv[a]);
+            te[a] = _mm512_mask_mov_pd(_mm512_set1_pd(f64::INFINITY), pos[a] | neg[a], tw);
         }
-        exit_box(l, lo, hi)
+        exit_from(l, (lo, hi), te, (pos, neg))
     }
 }
 
@@ -555,6 +566,22 @@ pub(crate) unsafe fn exit_box(
             let tw = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi64_pd(wall), l.ou[a]), l.inv[a]);
             te[a] = _mm512_mask_mov_pd(_mm512_set1_pd(f64::INFINITY), pos[a] | neg[a], tw);
         }
+        exit_from(l, (lo, hi), te, (pos, neg))
+    }
+}
+
+/// The end of [`exit_box`]: from the walls' times `te` of the box `lo ..= hi`
+/// and the direction's signs, the exit axis, time and next cell.
+#[inline(always)]
+unsafe fn exit_from(
+    l: &Lanes,
+    (lo, hi): ([__m512i; 3], [__m512i; 3]),
+    te: [__m512d; 3],
+    (pos, neg): ([u8; 3], [u8; 3]),
+) -> (__m512d, [__m512i; 3]) {
+    // SAFETY: called only from the walk's functions, which have the features.
+    unsafe {
+        let one = _mm512_set1_epi64(1);
         // The scalar walk's axis choice: x unless y is strictly sooner (or x
         // is NaN), then that unless z is.
         let first01 = _mm512_cmp_pd_mask::<_CMP_LE_OQ>(te[0], te[1]);
