@@ -270,13 +270,7 @@ mod tests {
     }
 
     fn scene(traversal: &str) -> Scene {
-        let text = "[image]\nwidth = 8\nheight = 8\n\
-            [camera]\nkind = 'perspective'\nposition = [11.5, 11.5, -60.0]\nlook_at = [11.5, 11.5, 11.5]\nup = [0.0, 1.0, 0.0]\nfov_y = 20.0\n\
-            [volume.phantom]\nkind = 'sphere'\nsize = 24\nradius = 6.0\nsigma = 1.0\n\
-            [surface]\nfilter = 'bspline3'\niso = 100.0\nior = 1.5\n\
-            [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
-        let set = vec![format!("render.traversal={traversal}")];
-        Scene::parse(text, std::path::Path::new("test.toml"), &set).unwrap()
+        crate::render::testing::small_scene(100.0, &[format!("render.traversal={traversal}")])
     }
 
     /// The lanes clip as [`Ctx::clip`] does, bit for bit: rays from inside

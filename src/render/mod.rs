@@ -17,6 +17,8 @@ pub mod first_hit;
 pub mod packet;
 pub mod stages;
 pub mod stats;
+#[cfg(test)]
+pub(crate) mod testing;
 pub mod tile;
 pub mod trace;
 

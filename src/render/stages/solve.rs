@@ -385,7 +385,6 @@ mod tests {
     use crate::classify::Method;
     use crate::phantom::{mix64, uniform};
     use crate::prepare::Prepared;
-    use crate::scene::Scene;
     use crate::with_field;
 
     /// The lane setup of the segments gives bitwise what the scalar loop
@@ -397,12 +396,7 @@ mod tests {
         if Isa::current() != Isa::Avx512 {
             return;
         }
-        let text = "[image]\nwidth = 8\nheight = 8\n\
-            [camera]\nkind = 'perspective'\nposition = [11.5, 11.5, -60.0]\nlook_at = [11.5, 11.5, 11.5]\nup = [0.0, 1.0, 0.0]\nfov_y = 20.0\n\
-            [volume.phantom]\nkind = 'sphere'\nsize = 24\nradius = 6.0\nsigma = 1.0\n\
-            [surface]\nfilter = 'bspline3'\niso = 127.5\nior = 1.5\n\
-            [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
-        let sc = Scene::parse(text, std::path::Path::new("test.toml"), &[]).unwrap();
+        let sc = crate::render::testing::small_scene(127.5, &[]);
         let m = 24;
         let samples = (0..m * m * m)
             .map(|k| {

@@ -253,34 +253,8 @@ unsafe fn clear_group<T: Coefficient>(
             inside |= (rays.inside[ch.i] as u8) << l;
         }
         let r = _mm512_loadu_epi64(idx.as_ptr());
-        let pd = |col: &[f64]| {
-            _mm512_mask_i64gather_pd::<8>(_mm512_setzero_pd(), valid, r, col.as_ptr())
-        };
-        let off = _mm512_set1_pd(ctx.lattice.offset);
         let zero = _mm512_setzero_pd();
-        let mut ray = Lanes {
-            r,
-            ou: [zero; 3],
-            du: [zero; 3],
-            inv: [zero; 3],
-            cell: [_mm512_setzero_si512(); 3],
-            t: pd(&rays.t),
-            t_start: zero,
-            t_end: pd(&rays.t_end),
-        };
-        for a in 0..3 {
-            // As `cell_ray`: scaled, then offset (no fused multiply-add).
-            let sa = _mm512_set1_pd(ctx.inv_spacing[a]);
-            ray.ou[a] = _mm512_add_pd(_mm512_mul_pd(pd(&rays.org[a]), sa), off);
-            ray.du[a] = _mm512_mul_pd(pd(&rays.dir[a]), sa);
-            ray.inv[a] = pd(&rays.cell_inv[a]);
-            ray.cell[a] = _mm512_cvtepi32_epi64(_mm512_mask_i64gather_epi32::<4>(
-                _mm256_setzero_si256(),
-                valid,
-                r,
-                rays.cell[a].as_ptr(),
-            ));
-        }
+        let ray = Lanes::gather(ctx, rays, r, valid);
         // `ClearCheck::start`: the slope along the new direction must have
         // the sign of the ray's medium (a sum from zero, whose sign of zero
         // no test below can see).
@@ -383,41 +357,8 @@ mod tests {
     use crate::classify::Method;
     use crate::phantom::{mix64, uniform};
     use crate::prepare::Prepared;
-    use crate::scene::Scene;
-    use crate::volume::{SampleType, Volume};
+    use crate::render::testing::{scrambled_ball, small_scene};
     use crate::with_field;
-
-    /// A 24³ volume: a ball of radius 7 with scrambled samples inside (high
-    /// curvature bounds) and a smooth ramp outside (low ones).
-    fn volume(seed: u64) -> Volume {
-        let n = 24;
-        let c = (n - 1) as f64 / 2.0;
-        let mut s = Vec::with_capacity(n * n * n);
-        for z in 0..n {
-            for y in 0..n {
-                for x in 0..n {
-                    let p = [x, y, z].map(|v| v as f64 - c);
-                    let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-                    let k = (x + n * (y + n * z)) as u64;
-                    s.push(if r < 7.0 {
-                        (255.0 * uniform(mix64(seed), k)) as f32
-                    } else {
-                        (r * 4.0) as f32
-                    });
-                }
-            }
-        }
-        Volume::new([n; 3], [1.0; 3], SampleType::F32, s).unwrap()
-    }
-
-    fn scene() -> Scene {
-        let text = "[image]\nwidth = 8\nheight = 8\n\
-            [camera]\nkind = 'perspective'\nposition = [11.5, 11.5, -60.0]\nlook_at = [11.5, 11.5, 11.5]\nup = [0.0, 1.0, 0.0]\nfov_y = 20.0\n\
-            [volume.phantom]\nkind = 'sphere'\nsize = 24\nradius = 6.0\nsigma = 1.0\n\
-            [surface]\nfilter = 'bspline3'\niso = 40.0\nior = 1.5\n\
-            [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
-        Scene::parse(text, std::path::Path::new("test.toml"), &[]).unwrap()
-    }
 
     /// Checks of rays placed at random points in random directions (some
     /// along axes, some with signed zeros), a hair past their start, with
@@ -430,9 +371,9 @@ mod tests {
         if !walk::available() {
             return;
         }
-        let sc = scene();
+        let sc = small_scene(40.0, &[]);
         for seed in 1..4u64 {
-            let prep = Prepared::new(Arc::new(volume(seed)), sc.surface.filter)
+            let prep = Prepared::new(Arc::new(scrambled_ball(seed)), sc.surface.filter)
                 .with_accel(sc.surface.iso, Method::Bezier(2));
             with_field!(&prep.field, f => {
                 let ctx = Ctx::new(&sc, &prep, f.as_ref());

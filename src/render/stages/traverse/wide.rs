@@ -7,9 +7,10 @@
 //! test, and the exit from the cell or block, with branches the hardware
 //! cannot predict. Here eight walks step together: each of those
 //! operations is one vector instruction for all eight lanes, the loads are
-//! gathers, and every per-lane choice is a mask. The whole function is
-//! 652 instructions and a step runs through part of them once for about
-//! 7 live lanes, so under 100 instructions per visit. A lane whose walk ends, at a candidate cell (to the solve
+//! gathers, and every per-lane choice is a mask. At 9b25384 (the octree
+//! alone) the whole function was 652 instructions and a step ran through
+//! part of them once for about 7 live lanes, so under 100 instructions per
+//! visit. A lane whose walk ends, at a candidate cell (to the solve
 //! queue) or out of its piece (to the record queue), is refilled with the
 //! next ray at once; two groups of lanes step in turn, so one group's
 //! arithmetic fills the other's wait on its gathers (9.3 ns from a gather
@@ -118,8 +119,6 @@ impl Staged {
     #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
     fn stage<T: Coefficient>(&mut self, ctx: &Ctx<T>, rays: &mut Rays, input: &[u32]) {
         debug_assert!(input.len() <= CHUNK);
-        let s = ctx.inv_spacing;
-        let off = _mm512_set1_pd(ctx.lattice.offset);
         for (g, group) in input.chunks(LANES).enumerate() {
             let k = g * LANES;
             let m = ((1u32 << group.len()) - 1) as __mmask8;
@@ -131,38 +130,13 @@ impl Staged {
                     m,
                     group.as_ptr() as *const i32,
                 ));
-                let pd = |col: &[f64]| {
-                    _mm512_mask_i64gather_pd::<8>(_mm512_setzero_pd(), m, r, col.as_ptr())
-                };
                 let mut advance: __mmask8 = 0;
                 for (l, &i) in group.iter().enumerate() {
                     let i = i as usize;
                     advance |= (rays.advance[i] as u8) << l;
                     rays.advance[i] = false;
                 }
-                let mut l = Lanes {
-                    r,
-                    ou: [_mm512_setzero_pd(); 3],
-                    du: [_mm512_setzero_pd(); 3],
-                    inv: [_mm512_setzero_pd(); 3],
-                    cell: [_mm512_setzero_si512(); 3],
-                    t: pd(&rays.t),
-                    t_start: pd(&rays.t_start),
-                    t_end: pd(&rays.t_end),
-                };
-                for a in 0..3 {
-                    // As `cell_ray`: scaled, then offset (no fused multiply-add).
-                    let sa = _mm512_set1_pd(s[a]);
-                    l.ou[a] = _mm512_add_pd(_mm512_mul_pd(pd(&rays.org[a]), sa), off);
-                    l.du[a] = _mm512_mul_pd(pd(&rays.dir[a]), sa);
-                    l.inv[a] = pd(&rays.cell_inv[a]);
-                    l.cell[a] = _mm512_cvtepi32_epi64(_mm512_mask_i64gather_epi32::<4>(
-                        _mm256_setzero_si256(),
-                        m,
-                        r,
-                        rays.cell[a].as_ptr(),
-                    ));
-                }
+                let mut l = Lanes::gather(ctx, rays, r, m);
                 if advance != 0 {
                     let (t, next) = exit_box(&l, l.cell, l.cell);
                     l.t = _mm512_mask_mov_pd(l.t, advance, t);
@@ -199,6 +173,55 @@ pub(crate) struct Lanes {
     pub t: __m512d,
     pub t_start: __m512d,
     pub t_end: __m512d,
+}
+
+impl Lanes {
+    /// The rays `r` (lanes of `m`; the others zero) as [`super::cell_ray`]
+    /// puts them in cell coordinates — scaled, then offset, no fused
+    /// multiply-add — with their cells, parameters and pieces, each column
+    /// one gather by ray index.
+    ///
+    /// # Safety
+    /// AVX-512 F, VL and DQ; every lane of `m` holds a ray index below the
+    /// rays' count.
+    #[inline(always)]
+    pub(crate) unsafe fn gather<T: Coefficient>(
+        ctx: &Ctx<T>,
+        rays: &Rays,
+        r: __m512i,
+        m: __mmask8,
+    ) -> Lanes {
+        // SAFETY: the caller's contract.
+        unsafe {
+            let pd = |col: &[f64]| {
+                _mm512_mask_i64gather_pd::<8>(_mm512_setzero_pd(), m, r, col.as_ptr())
+            };
+            let off = _mm512_set1_pd(ctx.lattice.offset);
+            let mut l = Lanes {
+                r,
+                ou: [_mm512_setzero_pd(); 3],
+                du: [_mm512_setzero_pd(); 3],
+                inv: [_mm512_setzero_pd(); 3],
+                cell: [_mm512_setzero_si512(); 3],
+                t: pd(&rays.t),
+                t_start: pd(&rays.t_start),
+                t_end: pd(&rays.t_end),
+            };
+            for a in 0..3 {
+                let sa = _mm512_set1_pd(ctx.inv_spacing[a]);
+                l.ou[a] = _mm512_add_pd(_mm512_mul_pd(pd(&rays.org[a]), sa), off);
+                l.du[a] = _mm512_mul_pd(pd(&rays.dir[a]), sa);
+                l.inv[a] = pd(&rays.cell_inv[a]);
+                l.cell[a] = _mm512_cvtepi32_epi64(_mm512_mask_i64gather_epi32::<4>(
+                    _mm256_setzero_si256(),
+                    m,
+                    r,
+                    rays.cell[a].as_ptr(),
+                ));
+            }
+            l
+        }
+    }
 }
 
 /// What the walk reads, as vectors and base pointers.
@@ -523,7 +546,6 @@ unsafe fn exit_block(l: &Lanes, level: __m512i) -> (__m512d, [__m512i; 3]) {
     // these intrinsics need.
     unsafe {
         let one = _mm512_set1_epi64(1);
-        let zero = _mm512_setzero_pd();
         let size = _mm512_sllv_epi64(one, level);
         let mut lo = [_mm512_setzero_si512(); 3];
         let mut hi = [_mm512_setzero_si512(); 3];
@@ -533,11 +555,7 @@ unsafe fn exit_block(l: &Lanes, level: __m512i) -> (__m512d, [__m512i; 3]) {
         for a in 0..3 {
             lo[a] = _mm512_sllv_epi64(_mm512_srav_epi64(l.cell[a], level), level);
             hi[a] = _mm512_sub_epi64(_mm512_add_epi64(lo[a], size), one);
-            pos[a] = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(l.du[a], zero);
-            neg[a] = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(l.du[a], zero);
-            let wall = _mm512_mask_mov_epi64(lo[a], pos[a], _mm512_add_epi64(hi[a], one));
-            let tw = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi64_pd(wall), l.ou[a]), l.inv[a]);
-            te[a] = _mm512_mask_mov_pd(_mm512_set1_pd(f64::INFINITY), pos[a] | neg[a], tw);
+            (te[a], pos[a], neg[a]) = wall(l, a, lo[a], hi[a]);
         }
         exit_from(l, (lo, hi), te, (pos, neg))
     }
@@ -554,19 +572,30 @@ pub(crate) unsafe fn exit_box(
     // SAFETY: called only from the walk, which runs with the features
     // these intrinsics need.
     unsafe {
-        let one = _mm512_set1_epi64(1);
-        let zero = _mm512_setzero_pd();
         let mut te = [_mm512_setzero_pd(); 3];
         let mut pos = [0u8; 3];
         let mut neg = [0u8; 3];
         for a in 0..3 {
-            pos[a] = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(l.du[a], zero);
-            neg[a] = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(l.du[a], zero);
-            let wall = _mm512_mask_mov_epi64(lo[a], pos[a], _mm512_add_epi64(hi[a], one));
-            let tw = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi64_pd(wall), l.ou[a]), l.inv[a]);
-            te[a] = _mm512_mask_mov_pd(_mm512_set1_pd(f64::INFINITY), pos[a] | neg[a], tw);
+            (te[a], pos[a], neg[a]) = wall(l, a, lo[a], hi[a]);
         }
         exit_from(l, (lo, hi), te, (pos, neg))
+    }
+}
+
+/// Along axis `a`, when each lane's ray reaches the wall of `lo ..= hi` it
+/// leaves through (∞ along an axis it does not move on), and the lanes
+/// moving up and down the axis.
+#[inline(always)]
+unsafe fn wall(l: &Lanes, a: usize, lo: __m512i, hi: __m512i) -> (__m512d, u8, u8) {
+    // SAFETY: called only from the walk's functions, which have the features.
+    unsafe {
+        let zero = _mm512_setzero_pd();
+        let pos = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(l.du[a], zero);
+        let neg = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(l.du[a], zero);
+        let wall = _mm512_mask_mov_epi64(lo, pos, _mm512_add_epi64(hi, _mm512_set1_epi64(1)));
+        let tw = _mm512_mul_pd(_mm512_sub_pd(_mm512_cvtepi64_pd(wall), l.ou[a]), l.inv[a]);
+        let te = _mm512_mask_mov_pd(_mm512_set1_pd(f64::INFINITY), pos | neg, tw);
+        (te, pos, neg)
     }
 }
 
@@ -998,42 +1027,8 @@ mod tests {
     use crate::phantom::{mix64, uniform};
     use crate::prepare::Prepared;
     use crate::render::context::Skip;
-    use crate::scene::Scene;
-    use crate::volume::{SampleType, Volume};
+    use crate::render::testing::{scrambled_ball, small_scene};
     use crate::with_field;
-
-    /// A 24³ volume: a ball of radius 7 with scrambled samples inside
-    /// (many small tagged regions) and a smooth ramp outside.
-    fn volume(seed: u64) -> Volume {
-        let n = 24;
-        let c = (n - 1) as f64 / 2.0;
-        let mut s = Vec::with_capacity(n * n * n);
-        for z in 0..n {
-            for y in 0..n {
-                for x in 0..n {
-                    let p = [x, y, z].map(|v| v as f64 - c);
-                    let r = (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt();
-                    let k = (x + n * (y + n * z)) as u64;
-                    s.push(if r < 7.0 {
-                        (255.0 * uniform(mix64(seed), k)) as f32
-                    } else {
-                        (r * 4.0) as f32
-                    });
-                }
-            }
-        }
-        Volume::new([n; 3], [1.0; 3], SampleType::F32, s).unwrap()
-    }
-
-    fn scene(traversal: &str) -> Scene {
-        let text = "[image]\nwidth = 8\nheight = 8\n\
-            [camera]\nkind = 'perspective'\nposition = [11.5, 11.5, -60.0]\nlook_at = [11.5, 11.5, 11.5]\nup = [0.0, 1.0, 0.0]\nfov_y = 20.0\n\
-            [volume.phantom]\nkind = 'sphere'\nsize = 24\nradius = 6.0\nsigma = 1.0\n\
-            [surface]\nfilter = 'bspline3'\niso = 120.0\nior = 1.5\n\
-            [backdrop]\ncenter = [11.5, 11.5, 80.0]\nnormal = [0.0, 0.0, -1.0]\nu_axis = [1.0, 0.0, 0.0]\nchecker = 4.0\n";
-        let set = vec![format!("render.traversal={traversal}")];
-        Scene::parse(text, std::path::Path::new("test.toml"), &set).unwrap()
-    }
 
     /// Rays from random points of (and around) the domain in random
     /// directions — some along axes, with signed zeros, tiny or NaN
@@ -1061,12 +1056,13 @@ mod tests {
             ("distance", Method::Accc, 6, Some(0)),
             ("distance", Method::Bezier(2), 7, Some(0)),
         ] {
-            let sc = scene(if budget.is_some() {
+            let walked = if budget.is_some() {
                 "octree"
             } else {
                 traversal
-            });
-            let prep = Prepared::new(Arc::new(volume(seed)), sc.surface.filter)
+            };
+            let sc = small_scene(120.0, &[format!("render.traversal={walked}")]);
+            let prep = Prepared::new(Arc::new(scrambled_ball(seed)), sc.surface.filter)
                 .with_accel(sc.surface.iso, method);
             with_field!(&prep.field, f => {
                 let ctx = Ctx::new(&sc, &prep, f.as_ref());
