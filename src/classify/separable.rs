@@ -33,11 +33,32 @@ where
     R: Fn(&[V]) -> V + Sync,
     D: Fn(V) -> bool + Sync,
 {
-    let [ncx, ncy, ncz] = lattice.cells;
     if lattice.cell_count() == 0 {
         return Tags::empty(lattice.cells);
     }
-    let s = field.kernel().support();
+    crate::with_support!(field.kernel().support(), S => {
+        per_cell_s::<S, V, M, R, D, T>(field, lattice, map, reduce, decide)
+    })
+}
+
+/// [`per_cell`] for support `S`: each window an `[V; S]` array, whose
+/// reduction the compiler then unrolls.
+#[inline(always)]
+fn per_cell_s<const S: usize, V, M, R, D, T: Coefficient>(
+    field: &Field<T>,
+    lattice: &Lattice,
+    map: M,
+    reduce: R,
+    decide: D,
+) -> Tags
+where
+    V: Copy + Default + Send + Sync,
+    M: Fn(f64) -> V + Sync,
+    R: Fn(&[V]) -> V + Sync,
+    D: Fn(V) -> bool + Sync,
+{
+    let [ncx, ncy, ncz] = lattice.cells;
+    let s = S;
     let lead = ((s - 1) / 2) as isize;
     let coeffs = field.coeffs();
     let data = coeffs.data();
@@ -53,7 +74,6 @@ where
         .map(|&(z0, z1)| {
             let nzk = z1 - z0 + s - 1; // coefficient slabs this chunk reads
             let nyk = ncy + s - 1;
-            let mut win = vec![V::default(); s];
             // x pass: X[kz][ky][cx]
             let mut x = vec![V::default(); nzk * nyk * ncx];
             let mut row = vec![V::default(); ncx + s - 1];
@@ -67,7 +87,8 @@ where
                     }
                     let dst = &mut x[(kz * nyk + ky) * ncx..][..ncx];
                     for (cx, d) in dst.iter_mut().enumerate() {
-                        *d = reduce(&row[cx..cx + s]);
+                        let win: [V; S] = std::array::from_fn(|j| row[cx + j]);
+                        *d = reduce(&win);
                     }
                 }
             }
@@ -76,9 +97,8 @@ where
             for kz in 0..nzk {
                 for cy in 0..ncy {
                     for cx in 0..ncx {
-                        for (j, w) in win.iter_mut().enumerate() {
-                            *w = x[(kz * nyk + cy + j) * ncx + cx];
-                        }
+                        let win: [V; S] =
+                            std::array::from_fn(|j| x[(kz * nyk + cy + j) * ncx + cx]);
                         y[(kz * ncy + cy) * ncx + cx] = reduce(&win);
                     }
                 }
@@ -88,9 +108,7 @@ where
             let mut flags = vec![0u8; (z1 - z0) * slab];
             for cz in 0..z1 - z0 {
                 for c in 0..slab {
-                    for (k, w) in win.iter_mut().enumerate() {
-                        *w = y[(cz + k) * slab + c];
-                    }
+                    let win: [V; S] = std::array::from_fn(|k| y[(cz + k) * slab + c]);
                     flags[cz * slab + c] = decide(reduce(&win)) as u8;
                 }
             }
