@@ -18,7 +18,9 @@ use crate::lattice::{Lattice, cell_at};
 use crate::simd::Isa;
 
 use super::masks::LinearMasks;
-use super::{Tags, refine_cells, slack, support_minus_iso, support_minus_iso_into};
+use super::{
+    Tags, refine_cells, slack, support_minus_iso, support_minus_iso_into, support_minus_iso_lane,
+};
 
 /// What the recursion learned about a cell.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -342,31 +344,6 @@ pub fn decide(b: &[f64], s: usize, depth: u8, eps: f64) -> Verdict {
     }
 }
 
-/// `c - iso` over `cell`'s `S³` support into lane `l` of `out` (`L`
-/// interleaved tensors, [`bernstein_in_place`]'s layout).
-#[inline(always)]
-fn gather_minus_iso<const S: usize, const L: usize, T: Coefficient>(
-    field: &Field<T>,
-    cell: [i64; 3],
-    iso: f64,
-    l: usize,
-    out: &mut [f64],
-) {
-    let coeffs = field.coeffs();
-    let base = field.support_offset(cell);
-    let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
-    let data = coeffs.data();
-    for k in 0..S {
-        for j in 0..S {
-            let row = &data[base + j * sy + k * sz..][..S];
-            let first = S * (j + S * k);
-            for (i, c) in row.iter().enumerate() {
-                out[(first + i) * L + l] = c.to_f64() - iso;
-            }
-        }
-    }
-}
-
 /// The masks of candidate `cells` (linear indices, ascending) as
 /// [`SubCells::cell_mask`] computes them, with the Bernstein transforms of
 /// `L` cells at a time in vector lanes (each with the operations of one);
@@ -399,7 +376,7 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
         }
         // Lanes past `len` keep an earlier group's values, never read.
         for (l, &i) in group[..len].iter().enumerate() {
-            gather_minus_iso::<S, L, T>(field, cell_at(lattice.cells, i), iso, l, &mut lanes);
+            support_minus_iso_lane::<S, L, T>(field, cell_at(lattice.cells, i), iso, l, &mut lanes);
         }
         bernstein_in_place::<S, L>(&mut lanes, &mut scratch, &m);
         for (l, &i) in group[..len].iter().enumerate() {

@@ -390,16 +390,31 @@ pub(crate) fn support_minus_iso_into<T: Coefficient>(
     iso: f64,
     out: &mut [f64],
 ) {
+    crate::with_support!(field.kernel().support(), S => {
+        support_minus_iso_lane::<S, 1, T>(field, cell, iso, 0, out)
+    })
+}
+
+/// `c - iso` over `cell`'s `S³` support into lane `l` of `out`, `L`
+/// interleaved tensors (element `e` of lane `l` at `e·L + l`).
+#[inline(always)]
+pub(crate) fn support_minus_iso_lane<const S: usize, const L: usize, T: Coefficient>(
+    field: &Field<T>,
+    cell: [i64; 3],
+    iso: f64,
+    l: usize,
+    out: &mut [f64],
+) {
     let coeffs = field.coeffs();
-    let s = field.kernel().support();
     let base = field.support_offset(cell);
     let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
     let data = coeffs.data();
-    for k in 0..s {
-        for j in 0..s {
-            let row = &data[base + j * sy + k * sz..][..s];
-            for (o, c) in out[s * (j + s * k)..][..s].iter_mut().zip(row) {
-                *o = c.to_f64() - iso;
+    for k in 0..S {
+        for j in 0..S {
+            let row = &data[base + j * sy + k * sz..][..S];
+            let first = S * (j + S * k);
+            for (i, c) in row.iter().enumerate() {
+                out[(first + i) * L + l] = c.to_f64() - iso;
             }
         }
     }
