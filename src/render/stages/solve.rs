@@ -182,16 +182,8 @@ fn segments<const L: usize, T: Coefficient>(
             *v = group[l.min(group.len() - 1)];
         }
         let (mut seg, mut span) = empty_segments::<L>();
-        // SAFETY: AVX-512 checked above; every index is a ray's.
-        let (base, tau, delta, t0, t1, len) = unsafe { segments_x8(ctx, rays, &idx) };
-        seg.base.copy_from_slice(&base);
-        for a in 0..3 {
-            seg.tau[a].copy_from_slice(&tau[a]);
-            seg.delta[a].copy_from_slice(&delta[a]);
-        }
-        span.t0.copy_from_slice(&t0);
-        span.t1.copy_from_slice(&t1);
-        span.len.copy_from_slice(&len);
+        // SAFETY: AVX-512 and L == 8 checked above; every index is a ray's.
+        unsafe { segments_x8(ctx, rays, &idx, &mut seg, &mut span) };
         return (seg, span);
     }
     segments_scalar(ctx, rays, group)
@@ -247,36 +239,28 @@ fn segments_scalar<const L: usize, T: Coefficient>(
 /// the one of cell 0 (it is affine in the cell).
 ///
 /// # Safety
-/// AVX-512 F, VL and DQ; every index is below the rays' count.
+/// AVX-512 F, VL and DQ; `L == 8`; every index is below the rays' count.
 #[cfg(target_arch = "x86_64")]
 #[target_feature(enable = "avx512f,avx512vl,avx512dq")]
-#[allow(clippy::type_complexity)]
-unsafe fn segments_x8<T: Coefficient>(
+unsafe fn segments_x8<const L: usize, T: Coefficient>(
     ctx: &Ctx<T>,
     rays: &Rays,
     idx: &[u32; 8],
-) -> (
-    [usize; 8],
-    [[f64; 8]; 3],
-    [[f64; 8]; 3],
-    [f64; 8],
-    [f64; 8],
-    [f64; 8],
+    seg: &mut LaneSegments<L>,
+    span: &mut Spans<L>,
 ) {
     use std::arch::x86_64::*;
     let coeffs = ctx.field.coeffs();
     let strides = [1, coeffs.stride(1), coeffs.stride(2)];
     let origin = ctx.field.support_offset([0, 0, 0]);
     let off = _mm512_set1_pd(ctx.field.kernel().knot_offset());
-    // SAFETY: the caller's contract; each array holds 8 values.
+    // SAFETY: the caller's contract; each array holds L = 8 values.
     unsafe {
         let r = _mm512_cvtepu32_epi64(_mm256_loadu_epi32(idx.as_ptr() as *const i32));
         let pd = |col: &[f64]| _mm512_i64gather_pd::<8>(r, col.as_ptr());
         let (t0, t1) = (pd(&rays.t), pd(&rays.seg_end));
         let mut base = _mm512_set1_epi64(origin as i64);
         let mut len2 = _mm512_setzero_pd();
-        let mut tau = [[0.0; 8]; 3];
-        let mut delta = [[0.0; 8]; 3];
         for a in 0..3 {
             let s = _mm512_set1_pd(ctx.inv_spacing[a]);
             let og = _mm512_mul_pd(pd(&rays.org[a]), s);
@@ -285,8 +269,8 @@ unsafe fn segments_x8<T: Coefficient>(
             let p0 = _mm512_add_pd(og, _mm512_mul_pd(t0, dg));
             let p1 = _mm512_add_pd(og, _mm512_mul_pd(t1, dg));
             let ta = _mm512_sub_pd(_mm512_add_pd(p0, off), _mm512_cvtepi64_pd(cell));
-            _mm512_storeu_pd(tau[a].as_mut_ptr(), ta);
-            _mm512_storeu_pd(delta[a].as_mut_ptr(), _mm512_sub_pd(p1, p0));
+            _mm512_storeu_pd(seg.tau[a].as_mut_ptr(), ta);
+            _mm512_storeu_pd(seg.delta[a].as_mut_ptr(), _mm512_sub_pd(p1, p0));
             base = _mm512_add_epi64(
                 base,
                 _mm512_mullo_epi64(cell, _mm512_set1_epi64(strides[a] as i64)),
@@ -296,12 +280,10 @@ unsafe fn segments_x8<T: Coefficient>(
             len2 = if a == 0 { sq } else { _mm512_add_pd(len2, sq) };
         }
         let len = _mm512_mul_pd(_mm512_sqrt_pd(len2), _mm512_sub_pd(t1, t0));
-        let mut out = ([0usize; 8], tau, delta, [0.0; 8], [0.0; 8], [0.0; 8]);
-        _mm512_storeu_epi64(out.0.as_mut_ptr() as *mut i64, base);
-        _mm512_storeu_pd(out.3.as_mut_ptr(), t0);
-        _mm512_storeu_pd(out.4.as_mut_ptr(), t1);
-        _mm512_storeu_pd(out.5.as_mut_ptr(), len);
-        out
+        _mm512_storeu_epi64(seg.base.as_mut_ptr() as *mut i64, base);
+        _mm512_storeu_pd(span.t0.as_mut_ptr(), t0);
+        _mm512_storeu_pd(span.t1.as_mut_ptr(), t1);
+        _mm512_storeu_pd(span.len.as_mut_ptr(), len);
     }
 }
 
