@@ -406,6 +406,95 @@ pub unsafe fn restrict_cubic_x8<T: Row4>(
     }
 }
 
+/// The safeguarded Newton iteration of
+/// [`crate::roots::bernstein::refine_lanes`] for 8 lanes in AVX-512
+/// registers, bitwise what its lane loop computes with fused multiply-adds:
+/// every step's decision per lane (bracket update, Newton or bisection,
+/// the stopping tests) becomes compares and masked moves over all lanes, so
+/// a step's eight divisions are one vector division. `mono` holds the
+/// monomial rows `0..=d`, `x` the start points, `lo_in` the lanes whose
+/// segment starts inside (bit per lane) and `active` the lanes to refine;
+/// the others return their start point after one evaluation's count.
+///
+/// # Safety
+/// The CPU must have AVX-512F and FMA ([`Isa::Avx512`]); `d < mono.len()`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma")]
+#[inline]
+pub unsafe fn refine_x8(
+    mono: &[[f64; 8]],
+    d: usize,
+    x: [f64; 8],
+    lo_in: u8,
+    active: u8,
+    iters: usize,
+) -> ([f64; 8], [u32; 8]) {
+    use std::arch::x86_64::*;
+    // SAFETY: each `[f64; 8]` is 64 readable bytes; rows `0..=d` exist.
+    let row = |k: usize| unsafe { _mm512_loadu_pd(mono[k].as_ptr()) };
+    // Horner for `g` and `g'` together, as the lane loop does.
+    let eval = |x: __m512d| {
+        let (mut v, mut dv) = (_mm512_setzero_pd(), _mm512_setzero_pd());
+        for k in (0..=d).rev() {
+            dv = _mm512_fmadd_pd(dv, x, v);
+            v = _mm512_fmadd_pd(v, x, row(k));
+        }
+        (v, dv)
+    };
+    let zero = _mm512_setzero_pd();
+    // SAFETY: 64 readable bytes.
+    let mut x = unsafe { _mm512_loadu_pd(x.as_ptr()) };
+    let (mut lo, mut hi) = (zero, _mm512_set1_pd(1.0));
+    let (mut g, mut dg) = eval(x);
+    let mut done: __mmask8 = !active;
+    let mut evals = _mm512_set1_epi64(1);
+    let one = _mm512_set1_epi64(1);
+    for _ in 0..iters {
+        let run = !done;
+        let step = run & !_mm512_cmp_pd_mask::<_CMP_EQ_OQ>(g, zero);
+        // `inside(g) == lo_in`: the bracket end at `x` moves up.
+        let up = !(_mm512_cmp_pd_mask::<_CMP_GT_OQ>(g, zero) ^ lo_in);
+        lo = _mm512_mask_mov_pd(lo, step & up, x);
+        hi = _mm512_mask_mov_pd(hi, step & !up, x);
+        let newton = _mm512_sub_pd(x, _mm512_div_pd(g, dg));
+        let inside_bracket = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(newton, lo)
+            & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(newton, hi);
+        let converged = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(
+            _mm512_abs_pd(_mm512_sub_pd(newton, x)),
+            _mm512_set1_pd(1e-14),
+        );
+        let moves = step & !converged;
+        let mid = _mm512_mul_pd(_mm512_set1_pd(0.5), _mm512_add_pd(lo, hi));
+        let next = _mm512_mask_mov_pd(x, moves, _mm512_mask_blend_pd(inside_bracket, mid, newton));
+        x = _mm512_mask_mov_pd(x, step & converged & inside_bracket, newton);
+        // `next != x` (true for a NaN, as the lane loop's `==` is false).
+        done = !(moves & _mm512_cmp_pd_mask::<_CMP_NEQ_UQ>(next, x));
+        if done == 0xFF {
+            break;
+        }
+        let (gn, dn) = eval(next);
+        let run = !done;
+        evals = _mm512_mask_add_epi64(evals, run, evals, one);
+        let stalls = _mm512_cmp_pd_mask::<_CMP_GE_OQ>(_mm512_abs_pd(gn), _mm512_abs_pd(g))
+            & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(
+                _mm512_abs_pd(_mm512_sub_pd(next, x)),
+                _mm512_set1_pd(1e-9),
+            );
+        let take = run & !stalls;
+        done = !take;
+        x = _mm512_mask_mov_pd(x, take, next);
+        g = _mm512_mask_mov_pd(g, take, gn);
+        dg = _mm512_mask_mov_pd(dg, take, dn);
+    }
+    let (mut xs, mut es) = ([0.0f64; 8], [0i64; 8]);
+    // SAFETY: 64 writable bytes each.
+    unsafe {
+        _mm512_storeu_pd(xs.as_mut_ptr(), x);
+        _mm512_storeu_si512(es.as_mut_ptr().cast(), evals);
+    }
+    (xs, es.map(|e| e as u32))
+}
+
 /// [`rows4x8`] kept in registers.
 ///
 /// # Safety

@@ -196,13 +196,69 @@ const REFINE_ITERS: usize = 64;
 /// when a short step (below 1e-9) no longer lowers `|g|`: the root then sits
 /// at machine precision. A stopped lane is frozen,
 /// so its result depends on its own polynomial alone, never on the others in
-/// its group. Returns the roots and the evaluations each lane spent.
+/// its group. Returns the roots and the evaluations each lane spent. With
+/// AVX-512 the steps run as masks over registers ([`crate::simd::refine_x8`],
+/// the same bits): the lane loop's branch per lane divided one lane after
+/// another.
 #[inline(always)]
 pub fn refine_lanes<const L: usize, M: crate::simd::Madd>(
     mono: &[[f64; L]; N],
     bern: &[[f64; L]; N],
     sides: &[u32; L],
     d: usize,
+    active: [bool; L],
+) -> ([f64; L], [u32; L]) {
+    let (x, lo_in) = refine_start(bern, sides, d);
+    #[cfg(target_arch = "x86_64")]
+    if L == 8 && M::FUSED && crate::simd::Isa::current() == crate::simd::Isa::Avx512 {
+        let bits = |b: &[bool; L]| (0..L).fold(0u8, |m, l| m | (b[l] as u8) << l);
+        let mut x8 = [0.0; 8];
+        x8.copy_from_slice(&x);
+        // SAFETY: L == 8, so `[[f64; L]; N]` is `[[f64; 8]; N]`; AVX-512 and
+        // FMA checked above; `d <= MAX_DEGREE`.
+        let (xs, evals) = unsafe {
+            let mono8 = &*(mono as *const [[f64; L]; N]).cast::<[[f64; 8]; N]>();
+            crate::simd::refine_x8(mono8, d, x8, bits(&lo_in), bits(&active), REFINE_ITERS)
+        };
+        return (
+            std::array::from_fn(|l| xs[l]),
+            std::array::from_fn(|l| evals[l]),
+        );
+    }
+    refine_lanes_scalar::<L, M>(mono, d, x, lo_in, active)
+}
+
+/// Where each lane of [`refine_lanes`] starts, where its control polygon
+/// first changes side, and whether it starts inside.
+#[inline(always)]
+fn refine_start<const L: usize>(
+    bern: &[[f64; L]; N],
+    sides: &[u32; L],
+    d: usize,
+) -> ([f64; L], [bool; L]) {
+    let mut x = [0.5f64; L];
+    let mut lo_in = [false; L];
+    for l in 0..L {
+        lo_in[l] = sides[l] & 1 == 1;
+        let changes = side_changes(sides[l], d);
+        if changes != 0 {
+            let k = changes.trailing_zeros() as usize;
+            let (a, b) = (bern[k][l], bern[k + 1][l]);
+            let f = (a / (a - b)).clamp(0.0, 1.0);
+            x[l] = (k as f64 + f) / d as f64;
+        }
+    }
+    (x, lo_in)
+}
+
+/// The iteration of [`refine_lanes`] lane by lane (any instruction set),
+/// from the start points `x`.
+#[inline(always)]
+fn refine_lanes_scalar<const L: usize, M: crate::simd::Madd>(
+    mono: &[[f64; L]; N],
+    d: usize,
+    mut x: [f64; L],
+    lo_in: [bool; L],
     active: [bool; L],
 ) -> ([f64; L], [u32; L]) {
     let eval = |x: &[f64; L]| {
@@ -215,20 +271,7 @@ pub fn refine_lanes<const L: usize, M: crate::simd::Madd>(
         }
         (v, dv)
     };
-    let mut x = [0.5f64; L];
     let (mut lo, mut hi) = ([0.0f64; L], [1.0f64; L]);
-    let mut lo_in = [false; L];
-    for l in 0..L {
-        lo_in[l] = sides[l] & 1 == 1;
-        // The polygon's first change of side.
-        let changes = side_changes(sides[l], d);
-        if changes != 0 {
-            let k = changes.trailing_zeros() as usize;
-            let (a, b) = (bern[k][l], bern[k + 1][l]);
-            let f = (a / (a - b)).clamp(0.0, 1.0);
-            x[l] = (k as f64 + f) / d as f64;
-        }
-    }
     let (mut g, mut dg) = eval(&x);
     let mut done = active.map(|a| !a);
     let mut evals = [1u32; L];
@@ -611,6 +654,88 @@ mod tests {
                 assert_eq!(alone[0].to_bits(), x[l].to_bits(), "lane {l}");
             }
         }
+    }
+
+    /// The AVX-512 refinement gives the lane loop's bits: roots and
+    /// evaluation counts, over single crossings of every steepness, exact
+    /// zeros at the start point, roots a hair from the ends, and lanes left
+    /// inactive. (Its stall test, a short step that no longer lowers `|g|`,
+    /// is a safeguard none of these reach.)
+    #[cfg(target_arch = "x86_64")]
+    #[test]
+    fn vector_refinement_is_the_lane_loop() {
+        use crate::simd::{Fused, Isa};
+        if !Isa::available().contains(&Isa::Avx512) {
+            return;
+        }
+        let basis = BernsteinBasis::new(9);
+        let mut draws = 0u64;
+        let mut next = || {
+            draws += 1;
+            crate::phantom::uniform(0x6a09_e667_f3bc_c909, draws)
+        };
+        let mut polys: Vec<Vec<f64>> = Vec::new();
+        for case in 0..400 {
+            let p: Vec<f64> = match case % 4 {
+                // One root, a factor steep or flat near it.
+                0 | 1 => {
+                    let r = next();
+                    let roots = [r, 1.0 + 2.0 * next(), -1.0 - next()];
+                    let scale = (10.0f64).powf(8.0 * next() - 4.0);
+                    let sign = if case % 8 < 4 { 1.0 } else { -1.0 };
+                    poly_from_roots(&roots, sign * scale, 9)
+                }
+                // Exactly zero where the polygon changes side: s - 1/2.
+                2 if case % 16 == 2 => poly_from_roots(&[0.5], 1.0, 9),
+                // A root a hair from either end, where Newton steps leave
+                // the bracket and the lanes bisect.
+                2 => {
+                    let r = if case % 8 == 2 {
+                        1e-7 * next()
+                    } else {
+                        1.0 - 1e-7 * next()
+                    };
+                    poly_from_roots(&[r, -0.2 - next(), 1.3 + next()], 1.0 + 9.0 * next(), 9)
+                }
+                // Any degree-9 polynomial (some not single crossings).
+                _ => (0..10).map(|_| 2.0 * next() - 1.0).collect(),
+            };
+            polys.push(p);
+        }
+        let mut refined = 0;
+        for batch in polys.chunks(8) {
+            let mut mono = [[0.0f64; 8]; N];
+            for (l, p) in batch.iter().enumerate() {
+                for k in 0..10 {
+                    mono[k][l] = p[k];
+                }
+            }
+            let bern = basis.bernstein_lanes::<8, Fused>(&mono);
+            let sides = lane_sides(&bern, 9);
+            // Lane 5 is left inactive even when it could be refined.
+            let active: [bool; 8] = std::array::from_fn(|l| {
+                l < batch.len() && lane_single_crossing(sides[l], 9, sides[l] & 1 == 1) && l != 5
+            });
+            let (x0, lo_in) = refine_start(&bern, &sides, 9);
+            let want = refine_lanes_scalar::<8, Fused>(&mono, 9, x0, lo_in, active);
+            let lo_bits = (0..8).fold(0u8, |m, l| m | (lo_in[l] as u8) << l);
+            let act_bits = (0..8).fold(0u8, |m, l| m | (active[l] as u8) << l);
+            // SAFETY: AVX-512 checked above.
+            let got =
+                unsafe { crate::simd::refine_x8(&mono, 9, x0, lo_bits, act_bits, REFINE_ITERS) };
+            for l in 0..8 {
+                assert_eq!(
+                    got.0[l].to_bits(),
+                    want.0[l].to_bits(),
+                    "lane {l}: {} vs {}",
+                    got.0[l],
+                    want.0[l]
+                );
+                assert_eq!(got.1[l], want.1[l], "lane {l} evaluations");
+            }
+            refined += active.iter().filter(|&&a| a).count();
+        }
+        assert!(refined > 150, "{refined} lanes refined");
     }
 
     #[test]
