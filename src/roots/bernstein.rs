@@ -211,14 +211,20 @@ pub fn refine_lanes<const L: usize, M: crate::simd::Madd>(
     let (x, lo_in) = refine_start(bern, sides, d);
     #[cfg(target_arch = "x86_64")]
     if L == 8 && M::FUSED && crate::simd::Isa::current() == crate::simd::Isa::Avx512 {
-        let bits = |b: &[bool; L]| (0..L).fold(0u8, |m, l| m | (b[l] as u8) << l);
         let mut x8 = [0.0; 8];
         x8.copy_from_slice(&x);
         // SAFETY: L == 8, so `[[f64; L]; N]` is `[[f64; 8]; N]`; AVX-512 and
         // FMA checked above; `d <= MAX_DEGREE`.
         let (xs, evals) = unsafe {
             let mono8 = &*(mono as *const [[f64; L]; N]).cast::<[[f64; 8]; N]>();
-            crate::simd::refine_x8(mono8, d, x8, bits(&lo_in), bits(&active), REFINE_ITERS)
+            crate::simd::refine_x8(
+                mono8,
+                d,
+                x8,
+                lane_bits(&lo_in),
+                lane_bits(&active),
+                REFINE_ITERS,
+            )
         };
         return (
             std::array::from_fn(|l| xs[l]),
@@ -226,6 +232,14 @@ pub fn refine_lanes<const L: usize, M: crate::simd::Madd>(
         );
     }
     refine_lanes_scalar::<L, M>(mono, d, x, lo_in, active)
+}
+
+/// Bit `l` set for each lane `l` that is `true` (`L ≤ 8`): the lane masks of
+/// [`crate::simd::refine_x8`].
+#[cfg(target_arch = "x86_64")]
+#[inline(always)]
+fn lane_bits<const L: usize>(b: &[bool; L]) -> u8 {
+    (0..L).fold(0u8, |m, l| m | (b[l] as u8) << l)
 }
 
 /// Where each lane of [`refine_lanes`] starts, where its control polygon
@@ -718,11 +732,17 @@ mod tests {
             });
             let (x0, lo_in) = refine_start(&bern, &sides, 9);
             let want = refine_lanes_scalar::<8, Fused>(&mono, 9, x0, lo_in, active);
-            let lo_bits = (0..8).fold(0u8, |m, l| m | (lo_in[l] as u8) << l);
-            let act_bits = (0..8).fold(0u8, |m, l| m | (active[l] as u8) << l);
             // SAFETY: AVX-512 checked above.
-            let got =
-                unsafe { crate::simd::refine_x8(&mono, 9, x0, lo_bits, act_bits, REFINE_ITERS) };
+            let got = unsafe {
+                crate::simd::refine_x8(
+                    &mono,
+                    9,
+                    x0,
+                    lane_bits(&lo_in),
+                    lane_bits(&active),
+                    REFINE_ITERS,
+                )
+            };
             for l in 0..8 {
                 assert_eq!(
                     got.0[l].to_bits(),
