@@ -110,12 +110,18 @@ fn round_up(x: f64) -> f32 {
 /// difference (one step along each of two axes, `∂ab`) of the coefficients in
 /// `cell`'s support, per [`HessianBound`] entry (in `f64`, not yet rounded
 /// up).
+///
+/// Compiled for the running instruction set (the differences and maxima of
+/// a support's rows fill vector lanes); exact, so the same on every one.
 pub fn hessian_bound<T: Coefficient>(field: &Field<T>, cell: [i64; 3]) -> [f64; 6] {
-    crate::with_support!(field.kernel().support(), S => hessian_bound_in::<S, T>(field, cell))
+    crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
+        crate::with_support!(field.kernel().support(), S => hessian_bound_in::<S, T>(field, cell))
+    })
 }
 
 /// [`hessian_bound`] for support `S` (fixed loop bounds: the build runs once
 /// per tagged cell, 380k of them on the teapot).
+#[inline(always)]
 fn hessian_bound_in<const S: usize, T: Coefficient>(field: &Field<T>, cell: [i64; 3]) -> [f64; 6] {
     let coeffs = field.coeffs();
     let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
@@ -131,38 +137,73 @@ fn hessian_bound_in<const S: usize, T: Coefficient>(field: &Field<T>, cell: [i64
             }
         }
     }
-    let mut h = [0.0f64; 6];
-    // `f64::max` would drop a NaN (coefficients overflowed to infinity):
-    // keep it, so the bound clears nothing.
-    let mut keep = |e: usize, d: f64| {
+    support_bound::<S>(&c)
+}
+
+/// [`hessian_bound`] of the support `c[z][y][x]`.
+#[inline(always)]
+fn support_bound<const S: usize>(c: &[[[f64; S]; S]; S]) -> [f64; 6] {
+    // Each entry's largest |difference|, per position along x (lanes,
+    // which vectorise), then across them. `f64::max` would drop a NaN
+    // (coefficients overflowed to infinity): `keep` holds on to it, so the
+    // bound clears nothing; the result is the same whatever the order.
+    #[inline(always)]
+    fn keep(acc: &mut f64, d: f64) {
         let d = d.abs();
-        if d > h[e] || d.is_nan() {
-            h[e] = d
+        *acc = if (d > *acc) | d.is_nan() { d } else { *acc };
+    }
+    let mut lanes = [[0.0f64; S]; 6];
+    // One loop nest per entry, over the positions where its difference
+    // exists (fixed bounds, no tests inside).
+    for plane in c {
+        for r in plane {
+            for x in 0..S - 2 {
+                keep(&mut lanes[0][x], r[x] - 2.0 * r[x + 1] + r[x + 2]);
+            }
         }
-    };
-    for z in 0..S {
+        for y in 0..S - 2 {
+            for x in 0..S {
+                keep(
+                    &mut lanes[1][x],
+                    plane[y][x] - 2.0 * plane[y + 1][x] + plane[y + 2][x],
+                );
+            }
+        }
+        for y in 0..S - 1 {
+            let (r, u) = (&plane[y], &plane[y + 1]);
+            for x in 0..S - 1 {
+                keep(&mut lanes[3][x], u[x + 1] - r[x + 1] - u[x] + r[x]);
+            }
+        }
+    }
+    for z in 0..S - 2 {
         for y in 0..S {
             for x in 0..S {
-                let v = c[z][y][x];
-                if x + 2 < S {
-                    keep(0, v - 2.0 * c[z][y][x + 1] + c[z][y][x + 2]);
-                }
-                if y + 2 < S {
-                    keep(1, v - 2.0 * c[z][y + 1][x] + c[z][y + 2][x]);
-                }
-                if z + 2 < S {
-                    keep(2, v - 2.0 * c[z + 1][y][x] + c[z + 2][y][x]);
-                }
-                if x + 1 < S && y + 1 < S {
-                    keep(3, c[z][y + 1][x + 1] - c[z][y][x + 1] - c[z][y + 1][x] + v);
-                }
-                if x + 1 < S && z + 1 < S {
-                    keep(4, c[z + 1][y][x + 1] - c[z][y][x + 1] - c[z + 1][y][x] + v);
-                }
-                if y + 1 < S && z + 1 < S {
-                    keep(5, c[z + 1][y + 1][x] - c[z][y + 1][x] - c[z + 1][y][x] + v);
-                }
+                keep(
+                    &mut lanes[2][x],
+                    c[z][y][x] - 2.0 * c[z + 1][y][x] + c[z + 2][y][x],
+                );
             }
+        }
+    }
+    for z in 0..S - 1 {
+        for y in 0..S {
+            let (r, b) = (&c[z][y], &c[z + 1][y]);
+            for x in 0..S - 1 {
+                keep(&mut lanes[4][x], b[x + 1] - r[x + 1] - b[x] + r[x]);
+            }
+        }
+        for y in 0..S - 1 {
+            let (r, u, b, bu) = (&c[z][y], &c[z][y + 1], &c[z + 1][y], &c[z + 1][y + 1]);
+            for x in 0..S {
+                keep(&mut lanes[5][x], bu[x] - u[x] - b[x] + r[x]);
+            }
+        }
+    }
+    let mut h = [0.0f64; 6];
+    for (he, lane) in h.iter_mut().zip(&lanes) {
+        for &d in lane {
+            keep(he, d);
         }
     }
     h
@@ -178,6 +219,94 @@ mod tests {
     use crate::phantom;
     use crate::volume::{SampleType, Volume};
     use crate::with_support;
+
+    /// The differences one position at a time, as the bound was first
+    /// written: the largest |difference| per entry, a NaN kept.
+    fn hessian_bound_one_by_one(c: &[f64], s: usize) -> [f64; 6] {
+        let at = |x: usize, y: usize, z: usize| c[x + s * (y + s * z)];
+        let mut h = [0.0f64; 6];
+        let mut keep = |e: usize, d: f64| {
+            let d = d.abs();
+            if d > h[e] || d.is_nan() {
+                h[e] = d
+            }
+        };
+        for z in 0..s {
+            for y in 0..s {
+                for x in 0..s {
+                    let v = at(x, y, z);
+                    if x + 2 < s {
+                        keep(0, v - 2.0 * at(x + 1, y, z) + at(x + 2, y, z));
+                    }
+                    if y + 2 < s {
+                        keep(1, v - 2.0 * at(x, y + 1, z) + at(x, y + 2, z));
+                    }
+                    if z + 2 < s {
+                        keep(2, v - 2.0 * at(x, y, z + 1) + at(x, y, z + 2));
+                    }
+                    if x + 1 < s && y + 1 < s {
+                        keep(
+                            3,
+                            at(x + 1, y + 1, z) - at(x + 1, y, z) - at(x, y + 1, z) + v,
+                        );
+                    }
+                    if x + 1 < s && z + 1 < s {
+                        keep(
+                            4,
+                            at(x + 1, y, z + 1) - at(x + 1, y, z) - at(x, y, z + 1) + v,
+                        );
+                    }
+                    if y + 1 < s && z + 1 < s {
+                        keep(
+                            5,
+                            at(x, y + 1, z + 1) - at(x, y + 1, z) - at(x, y, z + 1) + v,
+                        );
+                    }
+                }
+            }
+        }
+        h
+    }
+
+    #[test]
+    fn lane_differences_give_the_one_by_one_bound() {
+        // Bit for bit on every cell of a scrambled volume, and a NaN (from
+        // an infinite coefficient) kept wherever one occurs.
+        let dims = [9usize, 8, 10];
+        let vol = crate::volume::scrambled_u8(dims, 11);
+        for name in ["bspline2", "bspline3", "bspline5", "bspline7", "linear"] {
+            let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
+            let lat = Lattice::new(f.kernel(), dims);
+            let s = f.kernel().support();
+            for i in 0..lat.cell_count() {
+                let cell = crate::lattice::cell_at(lat.cells, i);
+                let support = crate::classify::support_minus_iso(&f, cell, 0.0);
+                let want = hessian_bound_one_by_one(&support, s);
+                let got = hessian_bound(&f, cell);
+                assert_eq!(
+                    got.map(f64::to_bits),
+                    want.map(f64::to_bits),
+                    "{name} {cell:?}"
+                );
+            }
+        }
+        // Infinities make NaN differences (inf - 2·inf) in some entries.
+        for at in [[0usize, 1], [21, 22], [40, 56], [5, 21], [63, 62]] {
+            let mut c = [[[0.0f64; 4]; 4]; 4];
+            let mut flat = vec![0.0; 64];
+            for (i, v) in flat.iter_mut().enumerate() {
+                *v = (i * 37 % 11) as f64;
+                if at.contains(&i) {
+                    *v = f64::INFINITY;
+                }
+                c[i / 16][i / 4 % 4][i % 4] = *v;
+            }
+            let want = hessian_bound_one_by_one(&flat, 4);
+            assert!(want.iter().any(|v| v.is_nan()), "{at:?}: a NaN to keep");
+            let got = support_bound::<4>(&c);
+            assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{at:?}");
+        }
+    }
 
     /// The second derivative of the exact restriction of the field to random
     /// segments (any direction, inside one cell, any cell) of a random volume

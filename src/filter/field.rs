@@ -390,8 +390,9 @@ impl<T: Coefficient> Field<T> {
 
     /// [`Field::value_grad_fast`] at `L` in-domain points `q[a][l]`, bitwise
     /// its result point by point. For cubic kernels (any storage)
-    /// under AVX-512 (`L == 8`) the points are located one by one, then
-    /// weighted and contracted in vector lanes together by
+    /// under AVX-512 (`L == 8`) the points are located
+    /// ([`Kernel::locate_lanes`]), weighted and contracted in vector lanes
+    /// together by
     /// [`crate::simd::cubic_value_grad_x8`]: one point at a time, the
     /// weights and the final horizontal sums were a chain of scalar work per
     /// crossing (single-thread sphere refract stage 32 → 30 ms). `f32` and
@@ -414,10 +415,10 @@ impl<T: Coefficient> Field<T> {
             let mut t = [[0.0f64; 8]; 3];
             let mut cell = [[0isize; 8]; 3];
             for a in 0..3 {
-                for l in 0..8 {
-                    // In bounds: this branch runs only with `L == 8`.
-                    (cell[a][l], t[a][l]) = self.kernel.locate(q[a][l]);
-                }
+                let mut qa = [0.0f64; 8];
+                // In bounds: this branch runs only with `L == 8`.
+                qa.copy_from_slice(&q[a][..8]);
+                (cell[a], t[a]) = self.kernel.locate_lanes(&qa);
             }
             let poly: [[f64; 4]; 4] =
                 std::array::from_fn(|j| std::array::from_fn(|m| self.kernel.weight_poly(j)[m]));

@@ -61,9 +61,30 @@ impl PhantomFormat {
     fn encode(self, v: f64) -> f32 {
         match self {
             PhantomFormat::F32 => v as f32,
-            PhantomFormat::U8 => v.round().clamp(0.0, 255.0) as f32,
-            PhantomFormat::U16 => v.round().clamp(0.0, 65535.0) as f32,
+            PhantomFormat::U8 => round_clamp(v, 255.0),
+            PhantomFormat::U16 => round_clamp(v, 65535.0),
         }
+    }
+
+    /// Whether values round to integers, so that one below half a unit is
+    /// stored as 0 whatever it is.
+    fn is_integer(self) -> bool {
+        !matches!(self, PhantomFormat::F32)
+    }
+}
+
+/// `v.round().clamp(0.0, max)` as `f32`, bit for bit, without the libm call
+/// `f64::round` is on the x86-64 baseline (no rounding instruction) for the
+/// positive values below 2⁵² a phantom mostly holds: truncation by
+/// conversion and an exact fraction. Zero, negative, huge and NaN values
+/// take `round` itself (it keeps the sign of zero).
+fn round_clamp(v: f64, max: f64) -> f32 {
+    if v > 0.0 && v < 4_503_599_627_370_496.0 {
+        let t = (v as i64) as f64;
+        let r = if v - t >= 0.5 { t + 1.0 } else { t };
+        r.min(max) as f32
+    } else {
+        v.round().clamp(0.0, max) as f32
     }
 }
 
@@ -223,9 +244,27 @@ impl SphereSpec {
     pub fn build(&self) -> Result<Volume, PhantomError> {
         self.validate()?;
         let n = self.size;
+        let c = self.center();
+        let far = self.zero_beyond();
         build_grid([n; 3], self.format, self.noise, self.seed, |p| {
-            self.value(p)
+            if far.is_some_and(|r| dist(p, c) > r) {
+                0.0
+            } else {
+                self.value(p)
+            }
         })
+    }
+
+    /// A distance from the centre beyond which every sample is stored as 0
+    /// without evaluating it, when there is one: integer formats without
+    /// noise, where the fringe has fallen below half a unit (holes only
+    /// lower it). The bound sits a relative 1e-9 beyond the exact one, far
+    /// above the rounding of `exp` and of the scaling, so the samples are
+    /// those the fringe gives.
+    fn zero_beyond(&self) -> Option<f64> {
+        let scale = self.format.full_scale();
+        (self.format.is_integer() && self.noise == 0.0 && self.sigma > 0.0)
+            .then(|| self.radius + self.sigma * (2.0 * (2.0 * scale).ln() * (1.0 + 1e-9)).sqrt())
     }
 }
 
@@ -423,6 +462,90 @@ mod tests {
         let r = fringe_radius(8.0, 2.0, 0.5).unwrap();
         assert!((fringe(r, 8.0, 2.0) - 0.5).abs() < 1e-12);
         assert!(fringe_radius(8.0, 2.0, 0.0).is_none());
+    }
+
+    #[test]
+    fn fast_rounding_is_round_and_clamp() {
+        let mut vs = vec![
+            0.0,
+            -0.0,
+            0.49999999999999994,
+            0.5,
+            1.5,
+            2.5,
+            254.5,
+            255.49,
+            255.5,
+            1e300,
+            -1e-300,
+            -0.3,
+            -0.5,
+            -0.7,
+            -3.5,
+            4503599627370495.5,
+            4503599627370496.0,
+            f64::NAN,
+            f64::INFINITY,
+            f64::NEG_INFINITY,
+            65534.5,
+            65535.5,
+            1e-320,
+        ];
+        for i in 0..2000 {
+            let x = i as f64 * 0.25;
+            vs.extend([
+                x,
+                f64::from_bits(x.to_bits() + 1),
+                f64::from_bits(x.to_bits().max(1) - 1),
+            ]);
+        }
+        for v in vs {
+            for max in [255.0, 65535.0] {
+                let want = v.round().clamp(0.0, max) as f32;
+                assert_eq!(round_clamp(v, max).to_bits(), want.to_bits(), "{v} {max}");
+            }
+        }
+    }
+
+    #[test]
+    fn samples_skipped_far_out_are_those_the_fringe_gives() {
+        // Every sample as `value` and `encode` give it, with and without the
+        // skip; a sharp fringe so that many samples lie beyond the bound.
+        for format in [PhantomFormat::U8, PhantomFormat::U16, PhantomFormat::F32] {
+            for sigma in [0.7, 3.0] {
+                let s = SphereSpec {
+                    size: 24,
+                    radius: 6.0,
+                    sigma,
+                    format,
+                    holes: vec![Hole {
+                        center: [11.0, 12.0, 11.5],
+                        radius: 2.0,
+                        sigma: 1.0,
+                    }],
+                    ..Default::default()
+                };
+                let v = s.build().unwrap();
+                let scale = format.full_scale();
+                let mut skipped = 0;
+                for z in 0..24 {
+                    for y in 0..24 {
+                        for x in 0..24 {
+                            let p = [x as f64, y as f64, z as f64];
+                            let want = format.encode(s.value(p) * scale);
+                            assert_eq!(v.get(x, y, z).to_bits(), want.to_bits(), "{p:?}");
+                            skipped +=
+                                s.zero_beyond().is_some_and(|r| dist(p, s.center()) > r) as usize;
+                        }
+                    }
+                }
+                if !format.is_integer() {
+                    assert_eq!(skipped, 0, "{format:?}: no skipping without rounding");
+                } else if sigma < 1.0 {
+                    assert!(skipped > 1000, "{format:?}: the test must skip samples");
+                }
+            }
+        }
     }
 
     #[test]
