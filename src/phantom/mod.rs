@@ -184,8 +184,11 @@ impl SphereSpec {
 
     /// Noise-free value in 0..1 at grid point `p`.
     pub fn value(&self, p: [f64; 3]) -> f64 {
-        let c = self.center();
-        let r = dist(p, c);
+        self.value_at(p, dist(p, self.center()))
+    }
+
+    /// [`SphereSpec::value`] at `p`, `r` from the centre.
+    fn value_at(&self, p: [f64; 3], r: f64) -> f64 {
         let mut v = fringe(r, self.radius, self.sigma);
         for h in &self.holes {
             v *= 1.0 - fringe(dist(p, h.center), h.radius, h.sigma);
@@ -247,10 +250,11 @@ impl SphereSpec {
         let c = self.center();
         let far = self.zero_beyond();
         build_grid([n; 3], self.format, self.noise, self.seed, |p| {
-            if far.is_some_and(|r| dist(p, c) > r) {
+            let r = dist(p, c);
+            if far.is_some_and(|far| r > far) {
                 0.0
             } else {
-                self.value(p)
+                self.value_at(p, r)
             }
         })
     }
@@ -526,7 +530,7 @@ mod tests {
                     ..Default::default()
                 };
                 let v = s.build().unwrap();
-                let scale = format.full_scale();
+                let (scale, far, c) = (format.full_scale(), s.zero_beyond(), s.center());
                 let mut skipped = 0;
                 for z in 0..24 {
                     for y in 0..24 {
@@ -534,8 +538,7 @@ mod tests {
                             let p = [x as f64, y as f64, z as f64];
                             let want = format.encode(s.value(p) * scale);
                             assert_eq!(v.get(x, y, z).to_bits(), want.to_bits(), "{p:?}");
-                            skipped +=
-                                s.zero_beyond().is_some_and(|r| dist(p, s.center()) > r) as usize;
+                            skipped += far.is_some_and(|r| dist(p, c) > r) as usize;
                         }
                     }
                 }
