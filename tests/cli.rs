@@ -151,6 +151,69 @@ fn phantom_writes_a_loadable_nrrd() {
     assert!(o.status.success(), "{}", stderr(&o));
 }
 
+/// `snell resample` upsamples a real scan: the lattice asked for, the
+/// world extent kept (spacing shrunk by `(n − 1)/(m − 1)`), the scan's own
+/// type, and a render of it through the scan's scene reports its peak
+/// memory.
+#[test]
+fn resample_upsamples_a_scan_that_renders() {
+    let t = Tmp::new("resample");
+    let up = t.path("cranium-up.nrrd");
+    let o = run(&[
+        "resample",
+        data("cranium-ct.nrrd").to_str().unwrap(),
+        "-o",
+        up.to_str().unwrap(),
+        "--size",
+        "301,301,128",
+        "--filter",
+        "smooth-bspline3",
+        "--lambda",
+        "1",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("301x301x128 u16"), "{}", stderr(&o));
+    let info = |p: &Path| -> serde_json::Value {
+        let o = run(&["info", p.to_str().unwrap(), "--json"]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        serde_json::from_slice(&o.stdout).unwrap()
+    };
+    let (a, b) = (info(&data("cranium-ct.nrrd")), info(&up));
+    assert_eq!(b["dims"], serde_json::json!([301, 301, 128]));
+    assert_eq!(b["type"], "u16");
+    for k in 0..3 {
+        let extent = |j: &serde_json::Value| j["extent"][k].as_f64().unwrap();
+        assert!(
+            (extent(&a) - extent(&b)).abs() < 1e-9 * extent(&a),
+            "axis {k}"
+        );
+    }
+    let (png, stats) = (t.path("up.png"), t.path("up.json"));
+    let o = run(&[
+        "render",
+        root().join("scenes/cranium.toml").to_str().unwrap(),
+        "--set",
+        &format!("volume.path={}", up.display()),
+        "--set",
+        "surface.filter=bspline3",
+        "--set",
+        "surface.lambda=0",
+        "--set",
+        "image.width=96",
+        "--set",
+        "image.height=96",
+        "-o",
+        png.to_str().unwrap(),
+        "--stats",
+        stats.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stderr(&o).contains("peak memory:"), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    assert!(j["peak_rss_mib"].as_f64().unwrap() > 10.0, "{j}");
+    assert!(j["counters"]["refractions"].as_u64().unwrap() > 0, "{j}");
+}
+
 /// `snell classify` on the paper's ball: every method's tags hold the exact
 /// ones, ACCC tags fewer cells than BMCC (the paper's Table 3 ratio), the
 /// Bézier hull fewer still, and the table form names the methods.
@@ -537,6 +600,13 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("file", "sample points: a row of two numbers", "sample {tooth} --filter bspline3 --points fields.txt", &["fields.txt", "line 2"]),
         bad("file", "sample points: NaN", "sample {tooth} --filter bspline3 --points nanpts.txt", &["nanpts.txt", "line 3"]),
         bad("file", "sample points file missing", "sample {tooth} --filter linear --points nopoints.txt", &["nopoints.txt"]),
+        bad("flag", "resample --size with a zero", "resample {tooth} -o up.nrrd --size 0,64,64", &["tooth.nrrd", "along x"]),
+        bad("flag", "resample --size with two values", "resample {tooth} -o up.nrrd --size 64,64", &["--size"]),
+        bad("flag", "resample --format unknown", "resample {tooth} -o up.nrrd --size 8,8,8 --format u3", &["--format", "u3"]),
+        bad("flag", "resample --filter unknown", "resample {tooth} -o up.nrrd --size 8,8,8 --filter gauss", &["gauss"]),
+        bad("file", "resample: input missing", "resample missing.nrrd -o up.nrrd --size 8,8,8", &["missing.nrrd"]),
+        bad("flag", "resample -o into a missing directory", "resample {tooth} -o /nonexistent-dir/up.nrrd --size 8,8,8", &["/nonexistent-dir"]),
+        bad("file", "resample: lattice over the memory limit", "resample {tooth} -o up.nrrd --size 2048,2048,2048", &["tooth.nrrd", "2048x2048x2048", "limit"]),
         bad("flag", "phantom --size 0", "phantom sphere --size 0 -o p.nrrd", &["size"]),
         bad("flag", "phantom --format unknown", "phantom sphere --format u3 -o p.nrrd", &["--format", "u3"]),
         bad("flag", "phantom --hole with two numbers", "phantom sphere --hole 1,2 -o p.nrrd", &["--hole"]),

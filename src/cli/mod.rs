@@ -10,6 +10,7 @@ mod merge;
 mod phantom;
 mod reference;
 mod render;
+mod resample;
 mod sample;
 
 use clap::{Parser, Subcommand};
@@ -37,6 +38,8 @@ enum Command {
     Sample(sample::Args),
     /// Write a synthetic volume (the glass sphere with holes, Marschner-Lobb) as NRRD.
     Phantom(phantom::Args),
+    /// Sample a volume's reconstruction on a new lattice over the same domain (e.g. upsample a scan to 1024³), as NRRD.
+    Resample(resample::Args),
     /// Render a scene file to PNG, with optional hit-position EXR, float EXR and stats.
     Render(render::Args),
     /// Join the EXR parts of a frame rendered piecewise (`render --region`) into one image.
@@ -59,6 +62,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(a) => info::run(a),
         Command::Sample(a) => sample::run(a),
         Command::Phantom(a) => phantom::run(a),
+        Command::Resample(a) => resample::run(a),
         Command::Render(a) => render::run(a),
         Command::Merge(a) => merge::run(a),
         Command::Reference(a) => reference::run(a),

@@ -136,8 +136,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(p) = &a.exr {
         frame.film.write_color_exr(p)?;
     }
+    // The whole process's peak (volume, coefficients, structures, film):
+    // what a large volume needs of the machine.
+    let peak_mib = snell::bench::machine::peak_rss_mib();
     if let Some(p) = &a.stats {
         let mut j = frame.stats.to_json();
+        j["peak_rss_mib"] = serde_json::json!(peak_mib);
         j["scene"] = serde_json::json!(a.scene.display().to_string());
         j["settings"] = serde_json::to_value(scene.render)?;
         j["filter"] = serde_json::json!(scene.surface.filter.to_string());
@@ -159,6 +163,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     if !a.quiet {
         eprint!("{}", frame.stats.table());
+        if let Some(m) = peak_mib {
+            eprintln!(
+                "peak memory: {} resident",
+                snell::volume::limits::human_bytes((m * 1048576.0) as u64)
+            );
+        }
     }
     Ok(())
 }

@@ -5,7 +5,8 @@
 //! - [`prefilter`]: exact recursive prefiltering (interpolating and smoothing
 //!   B-splines);
 //! - [`coeffs`]: the padded coefficient grid with a mirrored apron;
-//! - [`field`]: evaluation of value and gradient at points.
+//! - [`field`]: evaluation of value and gradient at points;
+//! - [`resample`]: the field sampled on a new lattice (upsampled scans).
 //!
 //! Names follow SPEC.md: `linear`, `catmull-rom`, `bspline2`..`bspline7`,
 //! `smooth-bspline3` (with `λ ≥ 0`).
@@ -14,6 +15,7 @@ pub mod coeffs;
 pub mod field;
 pub mod kernel;
 pub mod prefilter;
+pub mod resample;
 pub mod restrict;
 
 use std::fmt;
