@@ -29,7 +29,7 @@ pub struct Args {
     /// Smoothing of smooth-bspline3 (λ >= 0).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub lambda: f64,
-    /// Sample type written: u8, i8, u16, i16, u32, i32, f32 (integers rounded and clamped; default: the input's).
+    /// Sample type written: u8, i8, u16, i16, u32, i32, f32 (integers rounded and clamped; default: the input's, f64 as f32).
     #[arg(long)]
     pub format: Option<String>,
     /// Write gzip-encoded NRRD.
