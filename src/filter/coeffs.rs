@@ -316,6 +316,33 @@ mod tests {
         assert_eq!(mirror(7, 1), 0);
     }
 
+    /// A grid past [`PARALLEL_FILL_BYTES`], filled a slab per task: every
+    /// interior value is its sample's, and the apron mirrors them.
+    #[test]
+    fn large_grids_fill_like_small_ones() {
+        let dims = [203usize, 201, 205];
+        let n = dims[0] * dims[1] * dims[2];
+        let src: Vec<u32> = (0..n as u32).collect();
+        let c: Coeffs<f64> = Coeffs::from_interior(dims, &src, |&v| v as f64 * 0.5);
+        assert!(std::mem::size_of_val(c.data()) >= PARALLEL_FILL_BYTES);
+        let a = APRON as isize;
+        for z in (-a..dims[2] as isize + a).step_by(7) {
+            for y in -a..dims[1] as isize + a {
+                for x in -a..dims[0] as isize + a {
+                    let (i, j, k) = (mirror(x, dims[0]), mirror(y, dims[1]), mirror(z, dims[2]));
+                    let want = (i + dims[0] * (j + dims[1] * k)) as f64 * 0.5;
+                    assert_eq!(c.data()[c.offset(x, y, z)], want, "({x},{y},{z})");
+                }
+            }
+        }
+        // Every interior slab, not only the sampled ones.
+        for z in 0..dims[2] {
+            let (x, y) = (z % dims[0], (3 * z) % dims[1]);
+            let want = (x + dims[0] * (y + dims[1] * z)) as f64 * 0.5;
+            assert_eq!(c.data()[c.interior_offset(x, y, z)], want, "slab {z}");
+        }
+    }
+
     #[test]
     fn apron_mirrors_every_axis() {
         let dims = [3usize, 2, 1];
