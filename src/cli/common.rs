@@ -88,8 +88,12 @@ impl VolumeArgs {
     }
 
     pub fn load(&self, path: &Path) -> anyhow::Result<Volume> {
-        let opts = self.load_options()?;
-        let mut vol = volume::load(path, &opts)?;
+        self.load_with(path, &self.load_options()?)
+    }
+
+    /// [`VolumeArgs::load`] with options already taken from the arguments.
+    pub fn load_with(&self, path: &Path, opts: &LoadOptions) -> anyhow::Result<Volume> {
+        let mut vol = volume::load(path, opts)?;
         if vol.replaced_nonfinite > 0 {
             eprintln!(
                 "warning: {}: replaced {} non-finite samples (--allow-nan)",
@@ -121,4 +125,10 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
         bail!("{}: is a directory", path.display());
     }
     Ok(path.to_path_buf())
+}
+
+/// A size in MiB (as [`snell::bench::machine::peak_rss_mib`] reports the
+/// process's peak) as `1.5 GiB`.
+pub fn human_mib(mib: f64) -> String {
+    limits::human_bytes((mib * 1048576.0) as u64)
 }

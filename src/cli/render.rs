@@ -164,10 +164,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if !a.quiet {
         eprint!("{}", frame.stats.table());
         if let Some(m) = peak_mib {
-            eprintln!(
-                "peak memory: {} resident",
-                snell::volume::limits::human_bytes((m * 1048576.0) as u64)
-            );
+            eprintln!("peak memory: {} resident", super::common::human_mib(m));
         }
     }
     Ok(())

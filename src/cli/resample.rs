@@ -9,9 +9,9 @@ use clap::Args as ClapArgs;
 
 use snell::filter::FilterKind;
 use snell::filter::resample::resample;
-use snell::volume::{SampleType, limits, nrrd};
+use snell::volume::{SampleType, nrrd};
 
-use super::common::{VolumeArgs, check_output, triple};
+use super::common::{VolumeArgs, check_output, human_mib, triple};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -54,7 +54,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     };
     check_output(&a.output)?;
     let opts = a.vol.load_options()?;
-    let vol = a.vol.load(&a.volume)?;
+    let vol = a.vol.load_with(&a.volume, &opts)?;
     let ty = ty.unwrap_or(match vol.native_type() {
         SampleType::F64 => SampleType::F32,
         t => t,
@@ -73,12 +73,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let d = out.dims();
     let s = out.spacing();
     let peak = snell::bench::machine::peak_rss_mib()
-        .map(|m| {
-            format!(
-                ", peak memory {}",
-                limits::human_bytes((m * 1048576.0) as u64)
-            )
-        })
+        .map(|m| format!(", peak memory {}", human_mib(m)))
         .unwrap_or_default();
     eprintln!(
         "wrote {} ({}x{}x{} {}, spacing {:.6},{:.6},{:.6}; resampled with {} in {:.1} s{peak})",

@@ -161,6 +161,9 @@ impl<T: Coefficient> Coeffs<T> {
                 }
             }
         };
+        // The interior slabs are picked by filtering, not by slicing them
+        // out first: written that way the frame bench's generate stage,
+        // unrelated code, compiled worse (2.51 → 3.04 ms single thread).
         if std::mem::size_of_val(grid.data.as_slice()) >= PARALLEL_FILL_BYTES {
             use rayon::prelude::*;
             grid.data
