@@ -9,10 +9,14 @@
 //! - `distance`: the same walk over the distance field's empty cubes
 //!   ([`crate::octree::distance`]), which reach further than aligned blocks.
 //!
-//! With AVX-512 every cell walk runs eight rays at a time ([`wide`]); the
-//! scalar walks below are the reference it is tested against, and the path
-//! on other CPUs.
+//! With AVX-512 every cell walk runs eight rays at a time ([`wide`]), with
+//! AVX2 four ([`avx2`]); the scalar walks below are the reference both are
+//! tested against, and the path on other CPUs.
 
+#[cfg(target_arch = "x86_64")]
+pub mod avx2;
+#[cfg(all(test, target_arch = "x86_64"))]
+mod lane_check;
 #[cfg(target_arch = "x86_64")]
 pub mod wide;
 
@@ -52,6 +56,14 @@ pub fn traverse<const S: usize, T: Coefficient>(
                     };
                     return;
                 }
+                #[cfg(target_arch = "x86_64")]
+                if avx2::fits(ctx, tree) {
+                    // SAFETY: `fits` checked the CPU's features and the maps.
+                    unsafe {
+                        avx2::walk_octree(ctx, (tree, *leaf_level), rays, input, solve, record, c)
+                    };
+                    return;
+                }
                 let octree = OctreeBlocks {
                     tree,
                     leaf_level: *leaf_level,
@@ -64,6 +76,12 @@ pub fn traverse<const S: usize, T: Coefficient>(
                     // SAFETY: `fits_distance` checked the CPU's features and
                     // the maps.
                     unsafe { wide::walk_distance(ctx, p, rays, input, solve, record, c) };
+                    return;
+                }
+                #[cfg(target_arch = "x86_64")]
+                if avx2::fits_distance(ctx, p) {
+                    // SAFETY: as above.
+                    unsafe { avx2::walk_distance(ctx, p, rays, input, solve, record, c) };
                     return;
                 }
                 crate::with_isa!(crate::simd::Isa::current(), _L, _M => walk_interleaved(ctx, DistanceCubes::new(p), rays, input, solve, record, c));
@@ -730,6 +748,63 @@ fn walk_interleaved<E: EmptySpace, T: Coefficient>(
             if slot.is_none() {
                 live -= 1;
             }
+        }
+    }
+}
+
+/// What a lane walk's ended lanes hold, stored from their vectors: the ray,
+/// its candidate segment and its cell.
+#[cfg(target_arch = "x86_64")]
+struct EndedLanes<const N: usize> {
+    r: [i64; N],
+    t0: [f64; N],
+    t1: [f64; N],
+    cell: [[i64; N]; 3],
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<const N: usize> Default for EndedLanes<N> {
+    fn default() -> Self {
+        EndedLanes {
+            r: [0; N],
+            t0: [0.0; N],
+            t1: [0.0; N],
+            cell: [[0; N]; 3],
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+impl<const N: usize> EndedLanes<N> {
+    /// The lanes of bit set `to_solve` go to the solve with their segment
+    /// and cell (as [`walk_interleaved`] hands a ray over), those of
+    /// `escaped` to the record stage.
+    #[inline(always)]
+    fn hand_over(
+        &self,
+        to_solve: u32,
+        escaped: u32,
+        rays: &mut Rays,
+        solve: &mut Queue,
+        record: &mut Queue,
+    ) {
+        let mut m = to_solve;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let i = self.r[k] as usize;
+            rays.t[i] = self.t0[k];
+            rays.seg_end[i] = self.t1[k];
+            rays.set_cell(i, [self.cell[0][k], self.cell[1][k], self.cell[2][k]]);
+            solve.push(self.r[k] as u32);
+        }
+        let mut m = escaped;
+        while m != 0 {
+            let k = m.trailing_zeros() as usize;
+            m &= m - 1;
+            let i = self.r[k] as usize;
+            rays.fate[i] = Fate::Escaped;
+            record.push(self.r[k] as u32);
         }
     }
 }

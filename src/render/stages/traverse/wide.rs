@@ -50,7 +50,7 @@ use std::arch::x86_64::*;
 use std::sync::OnceLock;
 
 use super::super::super::context::Ctx;
-use super::super::super::packet::{Fate, Queue, Rays};
+use super::super::super::packet::{Queue, Rays};
 use crate::classify::bezier::SUB;
 use crate::filter::coeffs::Coefficient;
 use crate::lattice::Bricked;
@@ -61,11 +61,12 @@ use crate::render::stats::Counters;
 const LANES: usize = 8;
 
 /// Rays staged at a time.
-const CHUNK: usize = 64;
+pub(super) const CHUNK: usize = 64;
 
 /// A staged column: a chunk and a lane group of slack, so a full-width load
 /// at any position inside the chunk stays inside the column.
-type Col<T> = [T; CHUNK + LANES];
+/// (Eight lanes of slack also cover [`super::avx2`]'s four.)
+pub(super) type Col<T> = [T; CHUNK + LANES];
 
 const _: () = assert!(SUB == 4, "the span masks below assume 4³ sub-cells");
 
@@ -81,21 +82,22 @@ pub fn available() -> bool {
     })
 }
 
-/// The start states of up to [`CHUNK`] rays, column by column.
-struct Staged {
-    len: usize,
-    r: Col<i64>,
-    ou: [Col<f64>; 3],
-    du: [Col<f64>; 3],
-    inv: [Col<f64>; 3],
-    cell: [Col<i64>; 3],
-    t: Col<f64>,
-    t_start: Col<f64>,
-    t_end: Col<f64>,
+/// The start states of up to [`CHUNK`] rays, column by column (for both
+/// lane walks).
+pub(super) struct Staged {
+    pub(super) len: usize,
+    pub(super) r: Col<i64>,
+    pub(super) ou: [Col<f64>; 3],
+    pub(super) du: [Col<f64>; 3],
+    pub(super) inv: [Col<f64>; 3],
+    pub(super) cell: [Col<i64>; 3],
+    pub(super) t: Col<f64>,
+    pub(super) t_start: Col<f64>,
+    pub(super) t_end: Col<f64>,
 }
 
 impl Staged {
-    fn new() -> Staged {
+    pub(super) fn new() -> Staged {
         Staged {
             len: 0,
             r: [0; CHUNK + LANES],
@@ -463,7 +465,7 @@ unsafe fn axis_span(rep: u64, log: u64, lo: __m512i, hi: __m512i) -> __m512i {
 
 /// `rep` and the stride's log₂ per axis of the 4³ sub-cell layout (x
 /// fastest).
-const SPAN_ROWS: [(u64, u64); 3] = [
+pub(super) const SPAN_ROWS: [(u64, u64); 3] = [
     (0x1111_1111_1111_1111, 0),
     (0x0001_0001_0001_0001, 2),
     (1, 4),
@@ -795,8 +797,14 @@ fn masks_fit<T: Coefficient>(ctx: &Ctx<T>, bricked: Bricked) -> bool {
 /// features ([`available`]), and the skip map and the sub-cell masks'
 /// index cover the lattice in one brick layout.
 pub fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
-    available()
-        && tree.tags().cells == ctx.lattice.cells
+    available() && layout_fits(ctx, tree)
+}
+
+/// [`fits`] without the CPU check: the octree's skip map and the masks'
+/// index cover the lattice in one brick layout (what the AVX2 lane walk,
+/// [`super::avx2`], relies on too).
+pub(super) fn layout_fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
+    tree.tags().cells == ctx.lattice.cells
         && tree.skip_map().len() == tree.bricked().len()
         && masks_fit(ctx, tree.bricked())
 }
@@ -804,10 +812,14 @@ pub fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
 /// [`fits`] for the distance cubes of `p`: the maps (eight octants' or one
 /// centred) and the masks' index cover the lattice in one brick layout.
 pub fn fits_distance<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) -> bool {
+    available() && distance_layout_fits(ctx, p)
+}
+
+/// [`fits_distance`] without the CPU check.
+pub(super) fn distance_layout_fits<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) -> bool {
     let (bytes, stride, centred, bricked) = p.lane_maps();
     let maps = if centred { 1 } else { 8 };
-    available()
-        && p.cells() == ctx.lattice.cells
+    p.cells() == ctx.lattice.cells
         && bricked == Bricked::new(ctx.lattice.cells)
         && stride == if centred { 0 } else { bricked.len() }
         && bytes.len() == maps * bricked.len()
@@ -815,7 +827,9 @@ pub fn fits_distance<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) -> bool {
 }
 
 /// The sub-cell masks' index and masks, as the walk gathers them.
-fn lane_masks<'a, T: Coefficient>(ctx: &Ctx<'a, T>) -> Option<(&'a [u64], &'a [u32], &'a [u64])> {
+pub(super) fn lane_masks<'a, T: Coefficient>(
+    ctx: &Ctx<'a, T>,
+) -> Option<(&'a [u64], &'a [u32], &'a [u64])> {
     ctx.masks.map(|m| {
         let (index, masks) = m.parts();
         let (words, rank) = index.words();
@@ -980,195 +994,69 @@ const GROUPS: usize = 2;
 /// Hands the lanes that ended to their queues.
 #[inline(always)]
 unsafe fn finish(l: &Lanes, e: &Ended, rays: &mut Rays, solve: &mut Queue, record: &mut Queue) {
+    let mut out = super::EndedLanes::<LANES>::default();
     // SAFETY: called only from `walk_octree`, which runs with the
     // features these intrinsics need; each array holds LANES values.
     unsafe {
-        let mut r = [0i64; LANES];
-        let mut t0 = [0.0; LANES];
-        let mut t1 = [0.0; LANES];
-        let mut cell = [[0i64; LANES]; 3];
-        _mm512_storeu_epi64(r.as_mut_ptr(), l.r);
-        _mm512_storeu_pd(t0.as_mut_ptr(), e.t0);
-        _mm512_storeu_pd(t1.as_mut_ptr(), e.t1);
+        _mm512_storeu_epi64(out.r.as_mut_ptr(), l.r);
+        _mm512_storeu_pd(out.t0.as_mut_ptr(), e.t0);
+        _mm512_storeu_pd(out.t1.as_mut_ptr(), e.t1);
         for a in 0..3 {
-            _mm512_storeu_epi64(cell[a].as_mut_ptr(), l.cell[a]);
-        }
-        let mut m = e.solve;
-        while m != 0 {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let i = r[k] as usize;
-            rays.t[i] = t0[k];
-            rays.seg_end[i] = t1[k];
-            rays.set_cell(i, [cell[0][k], cell[1][k], cell[2][k]]);
-            solve.push(r[k] as u32);
-        }
-        let mut m = e.escaped;
-        while m != 0 {
-            let k = m.trailing_zeros() as usize;
-            m &= m - 1;
-            let i = r[k] as usize;
-            rays.fate[i] = Fate::Escaped;
-            record.push(r[k] as u32);
+            _mm512_storeu_epi64(out.cell[a].as_mut_ptr(), l.cell[a]);
         }
     }
+    out.hand_over(e.solve as u32, e.escaped as u32, rays, solve, record);
 }
 
 #[cfg(test)]
 mod tests {
-    use std::sync::Arc;
-
-    use bumpalo::Bump;
-    use glam::DVec3;
-
-    use super::super::{DistanceCubes, OctreeBlocks, walk_interleaved};
     use super::*;
-    use crate::classify::Method;
-    use crate::phantom::{mix64, uniform};
-    use crate::prepare::Prepared;
-    use crate::render::context::Skip;
-    use crate::render::testing::{scrambled_ball, small_scene};
-    use crate::with_field;
 
-    /// Rays from random points of (and around) the domain in random
-    /// directions — some along axes, with signed zeros, tiny or NaN
-    /// components, diagonals through edges and corners — with random pieces, some already past their end, some
-    /// to step past their cell first. Each walk runs until every ray has
-    /// escaped, re-entering after each candidate cell as after a solve
-    /// that found nothing; both walks must hand every ray the same cells
-    /// and segment bits, and count the same visits and sub-cell skips —
-    /// over octree blocks, DDA cells, and distance cubes (octant and
-    /// centred maps).
+    /// Every ray walks as in the scalar walk ([`super::super::lane_check`]).
     #[test]
     fn every_ray_walks_as_in_the_scalar_walk() {
         if !available() {
             return;
         }
-        let odd = [0.0, -0.0, 1e-300, -1e-300, f64::NAN];
-        // Distance walks over the eight octant maps (budget unlimited) and
-        // over the centred map (no budget).
-        for (traversal, method, seed, budget) in [
-            ("octree", Method::Bezier(2), 1, None),
-            ("octree", Method::Accc, 2, None),
-            ("dda", Method::Bezier(2), 3, None),
-            ("octree", Method::Bmcc, 4, None),
-            ("distance", Method::Bezier(2), 5, Some(usize::MAX)),
-            ("distance", Method::Accc, 6, Some(0)),
-            ("distance", Method::Bezier(2), 7, Some(0)),
-        ] {
-            let walked = if budget.is_some() {
-                "octree"
-            } else {
-                traversal
-            };
-            let sc = small_scene(120.0, &[format!("render.traversal={walked}")]);
-            let prep = Prepared::new(Arc::new(scrambled_ball(seed)), sc.surface.filter)
-                .with_accel(sc.surface.iso, method);
-            with_field!(&prep.field, f => {
-                let ctx = Ctx::new(&sc, &prep, f.as_ref());
-                let Skip::Octree { tree, leaf_level } = &ctx.skip else {
-                    panic!("{traversal} walks the octree");
-                };
-                assert!(fits(&ctx, tree), "{traversal} {method:?}");
-                assert_eq!(ctx.masks.is_some(), matches!(method, Method::Bezier(_)));
-                let cubes = budget.map(|b| Proximity::build_within(tree.tags(), b));
-                if let Some(p) = &cubes {
-                    assert_eq!(p.is_octant(), budget > Some(0));
-                    assert!(fits_distance(&ctx, p));
-                }
-                // The scalar walk and the lane walk over the same space.
-                let scalar = |rays: &mut Rays, input: &[u32], s: &mut Queue, r: &mut Queue, c: &mut Counters| {
-                    match &cubes {
-                        Some(p) => walk_interleaved(&ctx, DistanceCubes::new(p), rays, input, s, r, c),
-                        None => {
-                            let octree = OctreeBlocks { tree, leaf_level: *leaf_level };
-                            walk_interleaved(&ctx, octree, rays, input, s, r, c)
-                        }
-                    }
-                };
-                let lanes = |rays: &mut Rays, input: &[u32], s: &mut Queue, r: &mut Queue, c: &mut Counters| {
-                    // SAFETY: `fits` and `fits_distance` hold.
-                    unsafe {
-                        match &cubes {
-                            Some(p) => walk_distance(&ctx, p, rays, input, s, r, c),
-                            None => walk_octree(&ctx, (tree, *leaf_level), rays, input, s, r, c),
-                        }
-                    }
-                };
-                let bump = Bump::new();
-                let n = 3000;
-                let mut rays = Rays::with_capacity_in(n, false, &bump);
-                let u = |k: u64, j: u64| uniform(mix64(seed * 100_003 + k), j);
-                for k in 0..n as u64 {
-                    let o = DVec3::new(u(k, 0), u(k, 1), u(k, 2)) * 26.0 - DVec3::splat(1.0);
-                    let mut d: [f64; 3] = std::array::from_fn(|a| 2.0 * u(k, 3 + a as u64) - 1.0);
-                    if k.is_multiple_of(7) {
-                        let a = (k / 7 % 3) as usize;
-                        d[a] = odd[(k / 21) as usize % odd.len()];
-                    }
-                    if k.is_multiple_of(11) {
-                        d = [0.0, 0.0, 0.0].map(|_| 0.0);
-                        d[(k / 11 % 3) as usize] = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
-                    }
-                    // Through edges and corners: from cell centres along
-                    // diagonals, where exit times tie exactly.
-                    let o = if k.is_multiple_of(13) {
-                        d = [0, 1, 2].map(|a| if u(k, 9 + a) < 0.5 { -1.0 } else { 1.0 });
-                        if k.is_multiple_of(26) {
-                            d[2] = 0.5;
-                        }
-                        o.floor() + DVec3::splat(0.5)
-                    } else {
-                        o
-                    };
-                    rays.push((k as u32, k as u32), 1.0, true, o, DVec3::from_array(d));
-                }
-                rays.complete();
-                let mut c = Counters::default();
-                for i in 0..n {
-                    let k = i as u64;
-                    let t_end = 40.0 * u(k, 6) - 2.0;
-                    super::super::super::place::<4, _>(&ctx, &mut rays, i, (0.0, 0.0), t_end, &mut c);
-                    rays.advance[i] = k.is_multiple_of(5);
-                }
-                let mut input: Vec<u32> = (0..n as u32).collect();
-                let (mut solved, mut rounds) = (0, 0);
-                while !input.is_empty() {
-                    rounds += 1;
-                    let mut a = rays.clone();
-                    let mut b = rays.clone();
-                    let (mut sa, mut ra) = (Queue::new_in(&bump), Queue::new_in(&bump));
-                    let (mut sb, mut rb) = (Queue::new_in(&bump), Queue::new_in(&bump));
-                    let (mut ca, mut cb) = (Counters::default(), Counters::default());
-                    scalar(&mut a, &input, &mut sa, &mut ra, &mut ca);
-                    lanes(&mut b, &input, &mut sb, &mut rb, &mut cb);
-                    let sorted = |q: &Queue| {
-                        let mut v = q.to_vec();
-                        v.sort_unstable();
-                        v
-                    };
-                    assert_eq!(sorted(&sa), sorted(&sb), "{traversal} {method:?} round {rounds}");
-                    assert_eq!(sorted(&ra), sorted(&rb), "{traversal} {method:?} round {rounds}");
-                    assert_eq!(
-                        (ca.cells_visited, ca.subcell_skips),
-                        (cb.cells_visited, cb.subcell_skips)
-                    );
-                    for &r in &input {
-                        let i = r as usize;
-                        let bits = |x: &Rays| {
-                            (x.t[i].to_bits(), x.seg_end[i].to_bits(), x.cell_of(i), x.fate[i], x.advance[i])
-                        };
-                        assert_eq!(bits(&a), bits(&b), "ray {i} round {rounds}");
-                    }
-                    solved += sa.len();
-                    rays = b;
-                    for &r in sb.iter() {
-                        rays.advance[r as usize] = true;
-                    }
-                    input = sb.to_vec();
-                }
-                assert!(solved > 2000 && rounds > 3, "{traversal} {method:?}: {solved} solves in {rounds} rounds");
-            });
+        super::super::lane_check::every_ray_walks_as_in_the_scalar_walk::<Wide>();
+    }
+
+    /// The AVX-512 walk, for the shared check.
+    struct Wide;
+
+    impl super::super::lane_check::LaneWalk for Wide {
+        unsafe fn octree<T: Coefficient>(
+            ctx: &Ctx<T>,
+            tree: (&Octree, u32),
+            rays: &mut Rays,
+            input: &[u32],
+            solve: &mut Queue,
+            record: &mut Queue,
+            c: &mut Counters,
+        ) {
+            // SAFETY: the caller's contract.
+            unsafe { walk_octree(ctx, tree, rays, input, solve, record, c) }
+        }
+
+        unsafe fn distance<T: Coefficient>(
+            ctx: &Ctx<T>,
+            p: &Proximity,
+            rays: &mut Rays,
+            input: &[u32],
+            solve: &mut Queue,
+            record: &mut Queue,
+            c: &mut Counters,
+        ) {
+            // SAFETY: the caller's contract.
+            unsafe { walk_distance(ctx, p, rays, input, solve, record, c) }
+        }
+
+        fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
+            fits(ctx, tree)
+        }
+
+        fn fits_distance<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) -> bool {
+            fits_distance(ctx, p)
         }
     }
 

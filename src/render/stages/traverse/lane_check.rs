@@ -1,0 +1,192 @@
+//! The check every lane walk passes: each ray visits the same cells and
+//! hands the same segment bits to the solve as the scalar walk
+//! ([`super::walk_interleaved`]), over octree blocks, DDA cells and distance
+//! cubes (shared by [`super::wide`] and [`super::avx2`]).
+
+use std::sync::Arc;
+
+use bumpalo::Bump;
+use glam::DVec3;
+
+use super::{DistanceCubes, OctreeBlocks, walk_interleaved};
+use crate::classify::Method;
+use crate::filter::coeffs::Coefficient;
+use crate::octree::Octree;
+use crate::octree::distance::Proximity;
+use crate::phantom::{mix64, uniform};
+use crate::prepare::Prepared;
+use crate::render::context::{Ctx, Skip};
+use crate::render::packet::{Queue, Rays};
+use crate::render::stats::Counters;
+use crate::render::testing::{scrambled_ball, small_scene};
+use crate::with_field;
+
+/// A lane walk under test.
+pub(super) trait LaneWalk {
+    /// The octree (or DDA) walk.
+    ///
+    /// # Safety
+    /// [`LaneWalk::fits`] holds.
+    unsafe fn octree<T: Coefficient>(
+        ctx: &Ctx<T>,
+        tree: (&Octree, u32),
+        rays: &mut Rays,
+        input: &[u32],
+        solve: &mut Queue,
+        record: &mut Queue,
+        c: &mut Counters,
+    );
+    /// The distance-cube walk.
+    ///
+    /// # Safety
+    /// [`LaneWalk::fits_distance`] holds.
+    unsafe fn distance<T: Coefficient>(
+        ctx: &Ctx<T>,
+        p: &Proximity,
+        rays: &mut Rays,
+        input: &[u32],
+        solve: &mut Queue,
+        record: &mut Queue,
+        c: &mut Counters,
+    );
+    fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool;
+    fn fits_distance<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) -> bool;
+}
+
+/// Rays from random points of (and around) the domain in random
+/// directions — some along axes, with signed zeros, tiny or NaN
+/// components, diagonals through edges and corners — with random pieces, some already past their end, some
+/// to step past their cell first. Each walk runs until every ray has
+/// escaped, re-entering after each candidate cell as after a solve
+/// that found nothing; both walks must hand every ray the same cells
+/// and segment bits, and count the same visits and sub-cell skips —
+/// over octree blocks, DDA cells, and distance cubes (octant and
+/// centred maps).
+pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
+    let odd = [0.0, -0.0, 1e-300, -1e-300, f64::NAN];
+    // Distance walks over the eight octant maps (budget unlimited) and
+    // over the centred map (no budget).
+    for (traversal, method, seed, budget) in [
+        ("octree", Method::Bezier(2), 1, None),
+        ("octree", Method::Accc, 2, None),
+        ("dda", Method::Bezier(2), 3, None),
+        ("octree", Method::Bmcc, 4, None),
+        ("distance", Method::Bezier(2), 5, Some(usize::MAX)),
+        ("distance", Method::Accc, 6, Some(0)),
+        ("distance", Method::Bezier(2), 7, Some(0)),
+    ] {
+        let walked = if budget.is_some() {
+            "octree"
+        } else {
+            traversal
+        };
+        let sc = small_scene(120.0, &[format!("render.traversal={walked}")]);
+        let prep = Prepared::new(Arc::new(scrambled_ball(seed)), sc.surface.filter)
+            .with_accel(sc.surface.iso, method);
+        with_field!(&prep.field, f => {
+            let ctx = Ctx::new(&sc, &prep, f.as_ref());
+            let Skip::Octree { tree, leaf_level } = &ctx.skip else {
+                panic!("{traversal} walks the octree");
+            };
+            assert!(W::fits(&ctx, tree), "{traversal} {method:?}");
+            assert_eq!(ctx.masks.is_some(), matches!(method, Method::Bezier(_)));
+            let cubes = budget.map(|b| Proximity::build_within(tree.tags(), b));
+            if let Some(p) = &cubes {
+                assert_eq!(p.is_octant(), budget > Some(0));
+                assert!(W::fits_distance(&ctx, p));
+            }
+            // The scalar walk and the lane walk over the same space.
+            let scalar = |rays: &mut Rays, input: &[u32], s: &mut Queue, r: &mut Queue, c: &mut Counters| {
+                match &cubes {
+                    Some(p) => walk_interleaved(&ctx, DistanceCubes::new(p), rays, input, s, r, c),
+                    None => {
+                        let octree = OctreeBlocks { tree, leaf_level: *leaf_level };
+                        walk_interleaved(&ctx, octree, rays, input, s, r, c)
+                    }
+                }
+            };
+            let lanes = |rays: &mut Rays, input: &[u32], s: &mut Queue, r: &mut Queue, c: &mut Counters| {
+                // SAFETY: `fits` and `fits_distance` hold.
+                unsafe {
+                    match &cubes {
+                        Some(p) => W::distance(&ctx, p, rays, input, s, r, c),
+                        None => W::octree(&ctx, (tree, *leaf_level), rays, input, s, r, c),
+                    }
+                }
+            };
+            let bump = Bump::new();
+            let n = 3000;
+            let mut rays = Rays::with_capacity_in(n, false, &bump);
+            let u = |k: u64, j: u64| uniform(mix64(seed * 100_003 + k), j);
+            for k in 0..n as u64 {
+                let o = DVec3::new(u(k, 0), u(k, 1), u(k, 2)) * 26.0 - DVec3::splat(1.0);
+                let mut d: [f64; 3] = std::array::from_fn(|a| 2.0 * u(k, 3 + a as u64) - 1.0);
+                if k.is_multiple_of(7) {
+                    let a = (k / 7 % 3) as usize;
+                    d[a] = odd[(k / 21) as usize % odd.len()];
+                }
+                if k.is_multiple_of(11) {
+                    d = [0.0, 0.0, 0.0].map(|_| 0.0);
+                    d[(k / 11 % 3) as usize] = if k.is_multiple_of(2) { 1.0 } else { -1.0 };
+                }
+                // Through edges and corners: from cell centres along
+                // diagonals, where exit times tie exactly.
+                let o = if k.is_multiple_of(13) {
+                    d = [0, 1, 2].map(|a| if u(k, 9 + a) < 0.5 { -1.0 } else { 1.0 });
+                    if k.is_multiple_of(26) {
+                        d[2] = 0.5;
+                    }
+                    o.floor() + DVec3::splat(0.5)
+                } else {
+                    o
+                };
+                rays.push((k as u32, k as u32), 1.0, true, o, DVec3::from_array(d));
+            }
+            rays.complete();
+            let mut c = Counters::default();
+            for i in 0..n {
+                let k = i as u64;
+                let t_end = 40.0 * u(k, 6) - 2.0;
+                super::super::place::<4, _>(&ctx, &mut rays, i, (0.0, 0.0), t_end, &mut c);
+                rays.advance[i] = k.is_multiple_of(5);
+            }
+            let mut input: Vec<u32> = (0..n as u32).collect();
+            let (mut solved, mut rounds) = (0, 0);
+            while !input.is_empty() {
+                rounds += 1;
+                let mut a = rays.clone();
+                let mut b = rays.clone();
+                let (mut sa, mut ra) = (Queue::new_in(&bump), Queue::new_in(&bump));
+                let (mut sb, mut rb) = (Queue::new_in(&bump), Queue::new_in(&bump));
+                let (mut ca, mut cb) = (Counters::default(), Counters::default());
+                scalar(&mut a, &input, &mut sa, &mut ra, &mut ca);
+                lanes(&mut b, &input, &mut sb, &mut rb, &mut cb);
+                let sorted = |q: &Queue| {
+                    let mut v = q.to_vec();
+                    v.sort_unstable();
+                    v
+                };
+                assert_eq!(sorted(&sa), sorted(&sb), "{traversal} {method:?} round {rounds}");
+                assert_eq!(sorted(&ra), sorted(&rb), "{traversal} {method:?} round {rounds}");
+                assert_eq!(
+                    (ca.cells_visited, ca.subcell_skips),
+                    (cb.cells_visited, cb.subcell_skips)
+                );
+                for &r in &input {
+                    let i = r as usize;
+                    let bits = |x: &Rays| {
+                        (x.t[i].to_bits(), x.seg_end[i].to_bits(), x.cell_of(i), x.fate[i], x.advance[i])
+                    };
+                    assert_eq!(bits(&a), bits(&b), "ray {i} round {rounds}");
+                }
+                solved += sa.len();
+                rays = b;
+                for &r in sb.iter() {
+                    rays.advance[r as usize] = true;
+                }
+                input = sb.to_vec();
+            }
+            assert!(solved > 2000 && rounds > 3, "{traversal} {method:?}: {solved} solves in {rounds} rounds");
+        });
+    }
+}
