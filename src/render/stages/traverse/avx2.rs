@@ -29,7 +29,9 @@ use std::sync::OnceLock;
 
 use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
-use super::wide::{CHUNK, Col, SPAN_ROWS, Staged, distance_layout_fits, lane_masks, layout_fits};
+use super::wide::{
+    CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks, layout_fits,
+};
 use crate::classify::bezier::SUB;
 use crate::filter::coeffs::Coefficient;
 use crate::octree::distance::Proximity;
@@ -773,11 +775,6 @@ pub unsafe fn walk_distance<T: Coefficient>(
         // SAFETY: the caller checked the features.
         unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
     });
-}
-
-thread_local! {
-    /// Each thread's staging area, kept across calls.
-    static STAGED: std::cell::RefCell<Box<Staged>> = std::cell::RefCell::new(Box::new(Staged::new()));
 }
 
 /// Lane groups in flight, stepped in turn so one group's arithmetic fills

@@ -912,8 +912,9 @@ pub unsafe fn walk_distance<T: Coefficient>(
 
 thread_local! {
     /// Each thread's staging area, kept across calls (a traverse call
-    /// has a tile's rays or fewer; zeroing 9 KiB per call showed up).
-    static STAGED: std::cell::RefCell<Box<Staged>> = std::cell::RefCell::new(Box::new(Staged::new()));
+    /// has a tile's rays or fewer; zeroing 9 KiB per call showed up), for
+    /// both lane walks.
+    pub(super) static STAGED: std::cell::RefCell<Box<Staged>> = std::cell::RefCell::new(Box::new(Staged::new()));
 }
 
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512vpopcntdq,bmi2,popcnt")]
