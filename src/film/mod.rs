@@ -53,6 +53,80 @@ pub struct Film {
     pub color: Vec<[f32; 3]>,
 }
 
+/// Consecutive whole rows of a film's buffers, from image row `origin[1]`
+/// (the film's own column origin `origin[0]`), to copy tiles into.
+struct RowsMut<'a> {
+    width: usize,
+    full_width: usize,
+    origin: [usize; 2],
+    u: &'a mut [f32],
+    v: &'a mut [f32],
+    events: &'a mut [f32],
+    color: &'a mut [[f32; 3]],
+}
+
+impl<'a> RowsMut<'a> {
+    /// The rows before image row `y` and the rows from it on (`y` at or
+    /// past these rows' first, and at most one past their last).
+    fn split_at_row(self, y: u32) -> (RowsMut<'a>, RowsMut<'a>) {
+        let rows = y as usize - self.origin[1];
+        let at = rows * self.width;
+        let (u0, u1) = self.u.split_at_mut(at);
+        let (v0, v1) = self.v.split_at_mut(at);
+        let (e0, e1) = self.events.split_at_mut(at);
+        let (c0, c1) = self.color.split_at_mut(at);
+        let part = |u, v, events, color, row| RowsMut {
+            width: self.width,
+            full_width: self.full_width,
+            origin: [self.origin[0], row],
+            u,
+            v,
+            events,
+            color,
+        };
+        (
+            part(u0, v0, e0, c0, self.origin[1]),
+            part(u1, v1, e1, c1, y as usize),
+        )
+    }
+
+    /// [`Film::blit`] into these rows, which must hold the tile's pixels.
+    fn blit(&mut self, t: &TileOut, with_hits: bool) {
+        let [ox, oy] = self.origin;
+        match &t.region {
+            Region::Rect(tile) => {
+                let tw = tile.width() as usize;
+                for row in 0..tile.height() as usize {
+                    let src = row * tw;
+                    let dst = (tile.y0 as usize - oy + row) * self.width + tile.x0 as usize - ox;
+                    if with_hits {
+                        self.u[dst..dst + tw].copy_from_slice(&t.u[src..src + tw]);
+                        self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
+                        self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
+                    }
+                    if let Some(c) = &t.color {
+                        self.color[dst..dst + tw].copy_from_slice(&c[src..src + tw]);
+                    }
+                }
+            }
+            Region::List(pixels) => {
+                for (k, &p) in pixels.iter().enumerate() {
+                    let p = p as usize;
+                    let p = (p / self.full_width - oy) * self.width + p % self.full_width - ox;
+                    if with_hits {
+                        self.u[p] = t.u[k];
+                        self.v[p] = t.v[k];
+                        self.events[p] = t.events[k];
+                    }
+                    if let Some(c) = &t.color {
+                        self.color[p] = c[k];
+                    }
+                }
+            }
+        }
+    }
+}
+
 /// The hit-position image alone (what `compare` reads back).
 #[derive(Clone, Debug, PartialEq)]
 pub struct HitImage {
@@ -98,39 +172,82 @@ impl Film {
     ///
     /// Tiles are in image coordinates and must lie inside the film's window.
     pub fn blit(&mut self, t: &TileOut, with_hits: bool) {
-        let [ox, oy] = self.origin.map(|o| o as usize);
-        match &t.region {
-            Region::Rect(tile) => {
-                let tw = tile.width() as usize;
-                for row in 0..tile.height() as usize {
-                    let src = row * tw;
-                    let dst =
-                        (tile.y0 as usize - oy + row) * self.width as usize + tile.x0 as usize - ox;
-                    if with_hits {
-                        self.u[dst..dst + tw].copy_from_slice(&t.u[src..src + tw]);
-                        self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
-                        self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
-                    }
-                    if let Some(c) = &t.color {
-                        self.color[dst..dst + tw].copy_from_slice(&c[src..src + tw]);
-                    }
-                }
+        self.rows_mut().blit(t, with_hits);
+    }
+
+    /// [`Film::blit`] for every tile of `outs`, the rectangles' bands of
+    /// rows in parallel.
+    ///
+    /// Consecutive rectangles with the same rows (a row of tiles, as
+    /// [`crate::render::tile::tiles`] orders them) form a band, and bands
+    /// in increasing row order own disjoint rows of the buffers, so each is
+    /// copied by its own task: the copy is the first write to most of a
+    /// fresh film's pages, and on one thread it was the whole of a single
+    /// render's film stage (sphere 512×512: 2.3–2.8 ms between the tiles
+    /// and PRSS). Lists of pixels, and rectangles in any other order, are
+    /// copied one after another.
+    pub fn blit_all(&mut self, outs: &[TileOut], with_hits: bool) {
+        use rayon::prelude::*;
+        let mut bands: Vec<(u32, u32, &[TileOut])> = Vec::new();
+        let mut first = 0;
+        for (k, o) in outs.iter().enumerate() {
+            let Region::Rect(t) = &o.region else {
+                bands.clear();
+                break;
+            };
+            let same = k > first
+                && matches!(&outs[first].region, Region::Rect(f) if (f.y0, f.y1) == (t.y0, t.y1));
+            if k > first && !same {
+                let Region::Rect(f) = &outs[first].region else {
+                    unreachable!("every region so far is a rectangle")
+                };
+                bands.push((f.y0, f.y1, &outs[first..k]));
+                first = k;
             }
-            Region::List(pixels) => {
-                let full_w = self.full[0] as usize;
-                for (k, &p) in pixels.iter().enumerate() {
-                    let p = p as usize;
-                    let p = (p / full_w - oy) * self.width as usize + p % full_w - ox;
-                    if with_hits {
-                        self.u[p] = t.u[k];
-                        self.v[p] = t.v[k];
-                        self.events[p] = t.events[k];
-                    }
-                    if let Some(c) = &t.color {
-                        self.color[p] = c[k];
-                    }
-                }
+            if k + 1 == outs.len() {
+                bands.push((t.y0, t.y1, &outs[first..]));
             }
+        }
+        let ordered = bands.windows(2).all(|b| b[0].1 <= b[1].0)
+            && bands.first().is_some_and(|b| b.0 >= self.origin[1])
+            && bands
+                .last()
+                .is_some_and(|b| b.1 <= self.origin[1] + self.height);
+        if !ordered {
+            for o in outs {
+                self.blit(o, with_hits);
+            }
+            return;
+        }
+        // Split the buffers at the bands' rows: one view per band.
+        let mut views = Vec::with_capacity(bands.len());
+        let mut rest = self.rows_mut();
+        for &(y0, y1, tiles) in &bands {
+            let (_, from) = rest.split_at_row(y0);
+            let (band, after) = from.split_at_row(y1);
+            views.push((band, tiles));
+            rest = after;
+        }
+        views
+            .into_par_iter()
+            .with_max_len(1)
+            .for_each(|(mut band, tiles)| {
+                for o in tiles {
+                    band.blit(o, with_hits);
+                }
+            });
+    }
+
+    /// All of the film's rows, to write into.
+    fn rows_mut(&mut self) -> RowsMut<'_> {
+        RowsMut {
+            width: self.width as usize,
+            full_width: self.full[0] as usize,
+            origin: [self.origin[0] as usize, self.origin[1] as usize],
+            u: &mut self.u,
+            v: &mut self.v,
+            events: &mut self.events,
+            color: &mut self.color,
         }
     }
 
@@ -340,6 +457,97 @@ pub fn write_exr_placed(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::render::tile::tiles;
+
+    /// A tile output whose every value says which pixel and tile it is.
+    fn tile_out(region: Region, full_width: u32, tag: f32, colours: bool) -> TileOut {
+        let mut px = Vec::new();
+        region.for_each_pixel(full_width, |x, y| px.push((y * full_width + x) as f32));
+        TileOut {
+            region,
+            u: px.clone(),
+            v: px.iter().map(|p| -p).collect(),
+            events: vec![tag; px.len()],
+            color: colours.then(|| px.iter().map(|&p| [p, tag, 1.0]).collect()),
+            counters: Default::default(),
+            times: Default::default(),
+            trace: None,
+        }
+    }
+
+    /// The bands copied in parallel give the film one tile at a time
+    /// gives: whole images and windows (whose tiles are cut at the window,
+    /// as a `--region` render's are), with and without hits or colours,
+    /// and lists of pixels (copied in turn).
+    #[test]
+    fn parallel_bands_copy_as_tiles_one_at_a_time() {
+        let full = [53u32, 41];
+        let windows = [
+            Tile {
+                x0: 0,
+                y0: 0,
+                x1: 53,
+                y1: 41,
+            },
+            Tile {
+                x0: 5,
+                y0: 3,
+                x1: 40,
+                y1: 38,
+            },
+            Tile {
+                x0: 7,
+                y0: 17,
+                x1: 8,
+                y1: 18,
+            },
+        ];
+        for window in windows {
+            for (size, with_hits, colours) in [(16, true, false), (7, false, true), (1, true, true)]
+            {
+                let outs: Vec<TileOut> = tiles(full[0], full[1], size)
+                    .into_iter()
+                    .filter_map(|t| t.intersect(&window))
+                    .enumerate()
+                    .map(|(k, t)| tile_out(Region::Rect(t), full[0], k as f32, colours))
+                    .collect();
+                let mut one = Film::window(window, full);
+                for o in &outs {
+                    one.blit(o, with_hits);
+                }
+                let mut bands = Film::window(window, full);
+                bands.blit_all(&outs, with_hits);
+                let bits = |f: &Film| {
+                    let b = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
+                    let c: Vec<f32> = f.color.iter().flatten().copied().collect();
+                    (b(&f.u), b(&f.v), b(&f.events), b(&c))
+                };
+                assert_eq!(bits(&one), bits(&bands), "{window:?} tile {size}");
+                if with_hits {
+                    assert!(one.u.iter().all(|u| !u.is_nan()), "every pixel written");
+                }
+            }
+        }
+        // Lists of pixels after the rectangles: copied in turn.
+        let mut outs: Vec<TileOut> = tiles(full[0], full[1], 16)
+            .into_iter()
+            .map(|t| tile_out(Region::Rect(t), full[0], 1.0, true))
+            .collect();
+        outs.push(tile_out(
+            Region::List(vec![3, 60, 2000]),
+            full[0],
+            9.0,
+            true,
+        ));
+        let mut one = Film::new(full[0], full[1]);
+        for o in &outs {
+            one.blit(o, true);
+        }
+        let mut bands = Film::new(full[0], full[1]);
+        bands.blit_all(&outs, true);
+        assert_eq!(one.events, bands.events);
+        assert_eq!(bands.events[60], 9.0);
+    }
 
     #[test]
     fn hits_round_trip_with_nan() {

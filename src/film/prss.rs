@@ -1627,6 +1627,9 @@ pub fn shade(
     let bands: Vec<(Vec<u32>, PostStats)> = color
         .par_chunks_mut((w * BAND_ROWS).max(1))
         .enumerate()
+        // One band per task, so an idle thread takes bands one at a time
+        // (as the tiles, see `render::trace_regions`).
+        .with_max_len(1)
         .map(|(band, colors)| {
             let y0 = band * BAND_ROWS;
             let rows = colors.len() / w.max(1);
