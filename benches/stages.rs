@@ -6,8 +6,9 @@ use std::hint::black_box;
 use criterion::{Criterion, criterion_group, criterion_main};
 use glam::DVec3;
 
-use snell::classify::{self, Method};
+use snell::classify::{self, Method, bezier};
 use snell::filter::{Field, FilterKind};
+use snell::lattice::cell_at;
 use snell::octree::Octree;
 use snell::phantom::{PhantomFormat, SphereSpec};
 use snell::render::stages::refract::snell as bend;
@@ -134,6 +135,23 @@ fn classification(c: &mut Criterion) {
     }
     let tags = classify::classify(&f, iso, Method::Accc).tags;
     g.bench_function("octree-build", |b| b.iter(|| Octree::build(tags.clone())));
+    // The sub-cell masks of the cells the Bézier hull keeps (a cubic patch
+    // in AVX-512 registers where the CPU has it).
+    let kept = classify::classify(&f, iso, Method::Bezier(2)).tags;
+    let beta = bezier::bernstein_weights(&f);
+    let patches: Vec<Vec<f64>> = (0..kept.cells.iter().product::<usize>())
+        .filter(|&i| kept.get_index(i))
+        .take(2000)
+        .map(|i| bezier::cell_bernstein(&f, cell_at(kept.cells, i), iso, &beta))
+        .collect();
+    let mut sub = bezier::SubCells::new(&f);
+    g.bench_function(format!("sub-cell masks x{}", patches.len()), |b| {
+        b.iter(|| {
+            patches
+                .iter()
+                .fold(0u64, |a, p| a ^ sub.mask(black_box(p), 1e-9))
+        })
+    });
     g.finish();
 }
 

@@ -130,14 +130,29 @@ impl SubCells {
     /// Scratch for the masks of `field`'s cells.
     pub fn new<T: Coefficient>(field: &Field<T>) -> SubCells {
         SubCells {
-            s: field.kernel().support(),
             beta: bernstein_weights(field),
+            ..SubCells::for_support(field.kernel().support())
+        }
+    }
+
+    /// Scratch for the masks of patches of support `s`, without the
+    /// weights [`SubCells::cell_mask`] needs.
+    fn for_support(s: usize) -> SubCells {
+        SubCells {
+            s,
+            beta: Vec::new(),
             patch: vec![0.0; MAX_TENSOR],
             halves: vec![0.0; 8 * MAX_TENSOR],
             quarters: vec![0.0; 8 * MAX_TENSOR],
             x: vec![0.0; 2 * MAX_TENSOR],
             y: vec![0.0; 4 * MAX_TENSOR],
         }
+    }
+
+    /// [`SubCells::mask_scalar`], for tests of the register form.
+    #[cfg(test)]
+    pub(super) fn scalar_for_support(s: usize) -> SubCells {
+        SubCells::for_support(s)
     }
 
     /// The sub-cell mask of a cell with tensor Bernstein coefficients `b` of
@@ -170,8 +185,23 @@ impl SubCells {
         })
     }
 
+    /// [`SubCells::mask`] for support `S`: a cubic patch in AVX-512
+    /// registers when the CPU has them ([`super::cubic_mask`], the same
+    /// masks), otherwise [`SubCells::mask_scalar`].
     #[inline(always)]
     fn mask_s<const S: usize>(&mut self, b: &[f64], eps: f64) -> u64 {
+        #[cfg(target_arch = "x86_64")]
+        if S == 4 && crate::simd::Isa::current() == crate::simd::Isa::Avx512 {
+            let patch: &[f64; 64] = b[..64].try_into().expect("a cubic patch has 64 values");
+            // SAFETY: `Isa::Avx512` means the CPU has AVX-512 F.
+            return unsafe { super::cubic_mask::mask(patch, eps) };
+        }
+        self.mask_scalar::<S>(b, eps)
+    }
+
+    /// Two levels of de Casteljau halving in memory, for any support.
+    #[inline(always)]
+    pub(super) fn mask_scalar<const S: usize>(&mut self, b: &[f64], eps: f64) -> u64 {
         let n = S * S * S;
         if !straddles(&b[..n], eps) {
             return 0;
@@ -245,6 +275,16 @@ fn octants<const S: usize>(b: &[f64], x: &mut [f64], y: &mut [f64], out: &mut [f
             &mut hi[i * n..(i + 1) * n],
         );
     }
+}
+
+/// The eight children of an `S³` patch as [`octants`] computes them, one
+/// after another (for tests of the register form).
+#[cfg(test)]
+pub(super) fn octants_scalar<const S: usize>(b: &[f64]) -> Vec<f64> {
+    let n = S * S * S;
+    let (mut x, mut y, mut out) = (vec![0.0; 2 * n], vec![0.0; 4 * n], vec![0.0; 8 * n]);
+    octants::<S>(b, &mut x, &mut y, &mut out);
+    out
 }
 
 /// de Casteljau at 1/2 along the axis of `stride` (1, S or S²) of an `S³`

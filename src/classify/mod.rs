@@ -19,6 +19,8 @@
 
 pub mod bezier;
 pub mod bound;
+#[cfg(target_arch = "x86_64")]
+mod cubic_mask;
 pub mod curvature;
 pub mod masks;
 mod separable;
