@@ -392,6 +392,12 @@ pub fn decide(b: &[f64], s: usize, depth: u8, eps: f64) -> Verdict {
 /// BMCC's candidates reach it, each with its own pruning. (All of it in
 /// lanes, the halving's union of the lanes' halves was slower than the
 /// cells' own pruning: sphere 64³, 25 → 31 ms single thread.)
+///
+/// The whole cells' hulls are tested in the lanes too, so only the cells
+/// whose hull straddles the iso-value are copied out of them for their
+/// masks; for cubics each lane's coefficient rows are read as vectors and
+/// transposed into the lanes ([`crate::simd::gather_rows4`], the same
+/// values as one at a time).
 #[inline(always)]
 fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
     field: &Field<T>,
@@ -408,18 +414,57 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
     let (mut lanes, mut scratch) = (vec![0.0; n * L], vec![0.0; n * L]);
     let mut patch = vec![0.0; n];
     let mut cells = cells.peekable();
+    let coeffs = field.coeffs();
+    let (data, sy, sz) = (coeffs.data(), coeffs.stride(1), coeffs.stride(2));
     while cells.peek().is_some() {
         let mut len = 0;
         for (slot, i) in group.iter_mut().zip(&mut cells) {
             *slot = i;
             len += 1;
         }
-        // Lanes past `len` keep an earlier group's values, never read.
-        for (l, &i) in group[..len].iter().enumerate() {
-            support_minus_iso_lane::<S, L, T>(field, cell_at(lattice.cells, i), iso, l, &mut lanes);
+        if S == 4 {
+            // Lanes past `len` repeat the last cell; their results are not
+            // read.
+            let base: [usize; L] = std::array::from_fn(|l| {
+                field.support_offset(cell_at(lattice.cells, group[l.min(len - 1)]))
+            });
+            let span = (S - 1) * (sy + sz) + S;
+            assert!(
+                base.iter().all(|&b| b + span <= data.len()),
+                "support inside the coefficients"
+            );
+            for k in 0..S {
+                for j in 0..S {
+                    // SAFETY: every row of every lane lies below
+                    // `base + span`, checked above.
+                    let r =
+                        unsafe { crate::simd::gather_rows4::<T, L>(data, &base, j * sy + k * sz) };
+                    for (i, row) in r.iter().enumerate() {
+                        let e = i + S * (j + S * k);
+                        for (v, c) in lanes[e * L..(e + 1) * L].iter_mut().zip(row) {
+                            *v = c - iso;
+                        }
+                    }
+                }
+            }
+        } else {
+            // Lanes past `len` keep an earlier group's values, never read.
+            for (l, &i) in group[..len].iter().enumerate() {
+                support_minus_iso_lane::<S, L, T>(
+                    field,
+                    cell_at(lattice.cells, i),
+                    iso,
+                    l,
+                    &mut lanes,
+                );
+            }
         }
         bernstein_in_place::<S, L>(&mut lanes, &mut scratch, &m);
+        let hulls = straddles_lanes::<L>(&lanes[..n * L], eps);
         for (l, &i) in group[..len].iter().enumerate() {
+            if !hulls[l] {
+                continue;
+            }
             for (p, v) in patch.iter_mut().zip(lanes.chunks_exact(L)) {
                 *p = v[l];
             }
@@ -429,6 +474,20 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
             }
         }
     }
+}
+
+/// [`straddles`] of each of `L` interleaved tensors (element `e` of lane
+/// `l` at `e·L + l`), lane by lane the same test.
+#[inline(always)]
+fn straddles_lanes<const L: usize>(v: &[f64], eps: f64) -> [bool; L] {
+    let (mut lo, mut hi) = ([f64::INFINITY; L], [f64::NEG_INFINITY; L]);
+    for c in v.chunks_exact(L) {
+        for l in 0..L {
+            lo[l] = if c[l] < lo[l] { c[l] } else { lo[l] };
+            hi[l] = if c[l] > hi[l] { c[l] } else { hi[l] };
+        }
+    }
+    std::array::from_fn(|l| lo[l] <= eps && hi[l] > -eps)
 }
 
 /// Re-decides the cells `coarse` tagged by their Bézier hulls. With
