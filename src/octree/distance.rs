@@ -70,12 +70,17 @@ impl Proximity {
         let bricked = Bricked::new(tags.cells);
         let reach = if 8 * bricked.len() <= budget {
             let mut maps = vec![0u8; 8 * bricked.len()];
+            // The lane walk gathers a byte per step from anywhere in them:
+            // huge pages spare it most TLB misses on large lattices
+            // (BENCHMARKS.md: teapot traverse −10% single thread).
+            crate::heap::advise_huge_pages(&mut maps);
             maps.par_chunks_mut(bricked.len())
                 .enumerate()
                 .for_each(|(o, map)| to_bricked(tags.cells, &octant_map(tags, o), map));
             Reach::Octants(maps)
         } else {
             let mut map = vec![0u8; bricked.len()];
+            crate::heap::advise_huge_pages(&mut map);
             to_bricked(tags.cells, &centred_map(tags), &mut map);
             Reach::Centred(map)
         };

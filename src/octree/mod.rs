@@ -236,6 +236,8 @@ impl Octree {
 fn flatten(tags: &Tags, levels: &[Level], bricked: &Bricked) -> Vec<u8> {
     let top = levels.len();
     let mut skip = vec![0u8; bricked.len()];
+    // Gathered at random by the lane walk, as the distance maps are.
+    crate::heap::advise_huge_pages(&mut skip);
     skip.par_chunks_mut(64)
         .enumerate()
         .for_each(|(brick, out)| {
