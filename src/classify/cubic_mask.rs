@@ -10,7 +10,8 @@
 //! between the values of a row by permutes. Each child value is the same
 //! average of the same two values, in the same order, as the scalar halving
 //! ([`super::bezier`]'s `halve_into`), so the masks are bit for bit its masks
-//! (tested over random patches and the sphere's cells).
+//! (tested over random patches here, and against the scalar masks over
+//! every tagged cell of a scrambled volume in [`super::bezier`]'s tests).
 //!
 //! The masks were two thirds of the Bézier classification of the 64³
 //! sphere (`snell render` of an 8×8 image, one thread: 15 → 5 ms with the
@@ -31,7 +32,8 @@ type Patch = [__m512d; 8];
 /// `0.5 · (a + b)`, the halving's one operation.
 #[inline(always)]
 unsafe fn avg(a: __m512d, b: __m512d) -> __m512d {
-    // SAFETY: called only from `mask`, which has AVX-512 F.
+    // SAFETY: called only from AVX-512 F code (`mask`, and the tests'
+    // `children`).
     unsafe { _mm512_mul_pd(_mm512_set1_pd(0.5), _mm512_add_pd(a, b)) }
 }
 

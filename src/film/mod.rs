@@ -188,12 +188,41 @@ impl Film {
     /// copied one after another.
     pub fn blit_all(&mut self, outs: &[TileOut], with_hits: bool) {
         use rayon::prelude::*;
+        let Some(bands) = self.bands(outs) else {
+            for o in outs {
+                self.blit(o, with_hits);
+            }
+            return;
+        };
+        // Split the buffers at the bands' rows: one view per band.
+        let mut views = Vec::with_capacity(bands.len());
+        let mut rest = self.rows_mut();
+        for &(y0, y1, tiles) in &bands {
+            let (_, from) = rest.split_at_row(y0);
+            let (band, after) = from.split_at_row(y1);
+            views.push((band, tiles));
+            rest = after;
+        }
+        views
+            .into_par_iter()
+            .with_max_len(1)
+            .for_each(|(mut band, tiles)| {
+                for o in tiles {
+                    band.blit(o, with_hits);
+                }
+            });
+    }
+
+    /// The bands of rows of `outs` for [`Film::blit_all`]: `(y0, y1, tiles)`
+    /// per run of rectangles with the same rows, when every region is a
+    /// rectangle and the bands come in increasing, disjoint row order inside
+    /// the window; `None` otherwise.
+    fn bands<'a>(&self, outs: &'a [TileOut]) -> Option<Vec<(u32, u32, &'a [TileOut])>> {
         let mut bands: Vec<(u32, u32, &[TileOut])> = Vec::new();
         let mut first = 0;
         for (k, o) in outs.iter().enumerate() {
             let Region::Rect(t) = &o.region else {
-                bands.clear();
-                break;
+                return None;
             };
             let same = k > first
                 && matches!(&outs[first].region, Region::Rect(f) if (f.y0, f.y1) == (t.y0, t.y1));
@@ -213,29 +242,7 @@ impl Film {
             && bands
                 .last()
                 .is_some_and(|b| b.1 <= self.origin[1] + self.height);
-        if !ordered {
-            for o in outs {
-                self.blit(o, with_hits);
-            }
-            return;
-        }
-        // Split the buffers at the bands' rows: one view per band.
-        let mut views = Vec::with_capacity(bands.len());
-        let mut rest = self.rows_mut();
-        for &(y0, y1, tiles) in &bands {
-            let (_, from) = rest.split_at_row(y0);
-            let (band, after) = from.split_at_row(y1);
-            views.push((band, tiles));
-            rest = after;
-        }
-        views
-            .into_par_iter()
-            .with_max_len(1)
-            .for_each(|(mut band, tiles)| {
-                for o in tiles {
-                    band.blit(o, with_hits);
-                }
-            });
+        ordered.then_some(bands)
     }
 
     /// All of the film's rows, to write into.
@@ -516,6 +523,12 @@ mod tests {
                     one.blit(o, with_hits);
                 }
                 let mut bands = Film::window(window, full);
+                let split = bands.bands(&outs).expect("rows of rectangles form bands");
+                assert_eq!(
+                    split.iter().map(|b| b.2.len()).sum::<usize>(),
+                    outs.len(),
+                    "{window:?} tile {size}"
+                );
                 bands.blit_all(&outs, with_hits);
                 let bits = |f: &Film| {
                     let b = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
@@ -544,6 +557,7 @@ mod tests {
             one.blit(o, true);
         }
         let mut bands = Film::new(full[0], full[1]);
+        assert!(bands.bands(&outs).is_none(), "a list is copied in turn");
         bands.blit_all(&outs, true);
         assert_eq!(one.events, bands.events);
         assert_eq!(bands.events[60], 9.0);

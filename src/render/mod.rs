@@ -307,12 +307,12 @@ thread_local! {
 /// Traces regions in parallel; results come back in region order.
 ///
 /// Every tile is a task of its own (`with_max_len(1)`), so a thread that
-/// runs out of tiles takes them from the other's share one at a time. By
-/// default rayon cuts the tiles into a few runs per thread (four on two
-/// threads) and a thread finishes a run it has started alone: on this
-/// shared machine, where one core at times ran a third slower, the other
-/// finished its 512 tiles of the sphere 14 ms before it (`snell render
-/// --trace`, two runs of six), idle for a quarter of the tile pass.
+/// runs out of tiles takes them from another thread's share one at a
+/// time. By default rayon cuts the tiles into a few runs per thread (four
+/// on two threads) and a thread finishes a run it has started alone: on
+/// this shared machine, where one core at times ran a third slower, the
+/// other finished its 512 tiles of the sphere 14 ms before it (`snell
+/// render --trace`, two runs of six), idle for a quarter of the tile pass.
 fn trace_regions<T: Coefficient>(
     ctx: &Ctx<T>,
     regions: Vec<Region>,
