@@ -64,7 +64,7 @@ const HUGE_PAGE: usize = 2 << 20;
 /// pages make nearly every neighbourhood a TLB miss; one huge page covers
 /// 512 small ones (teapot solve stage −6%, prefilter −12%: BENCHMARKS.md).
 /// The walk's skip and distance maps are read the same way, a byte per
-/// step (teapot traverse stage −10% single thread).
+/// step (teapot traverse stage 8–10% less single thread).
 pub fn advise_huge_pages<T>(buf: &mut [T]) {
     let bytes = std::mem::size_of_val(buf);
     if bytes < 2 * HUGE_PAGE {

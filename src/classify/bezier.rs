@@ -236,19 +236,26 @@ impl SubCells {
 /// ignored either way).
 #[inline(always)]
 fn straddles(v: &[f64], eps: f64) -> bool {
-    let (mut lo, mut hi) = ([f64::INFINITY; 8], [f64::NEG_INFINITY; 8]);
-    let mut chunks = v.chunks_exact(8);
-    for c in &mut chunks {
-        for l in 0..8 {
-            lo[l] = if c[l] < lo[l] { c[l] } else { lo[l] };
-            hi[l] = if c[l] > hi[l] { c[l] } else { hi[l] };
-        }
-    }
-    for (l, &x) in chunks.remainder().iter().enumerate() {
+    let (mut lo, mut hi) = lane_extremes::<8>(v);
+    for (l, &x) in v.chunks_exact(8).remainder().iter().enumerate() {
         lo[l] = if x < lo[l] { x } else { lo[l] };
         hi[l] = if x > hi[l] { x } else { hi[l] };
     }
     lo.iter().any(|&x| x <= eps) && hi.iter().any(|&x| x > -eps)
+}
+
+/// The least and greatest of `v[l]`, `v[l + L]`, … for each `l < L`, over
+/// `v`'s whole chunks of `L` (a NaN never replaces an extreme).
+#[inline(always)]
+fn lane_extremes<const L: usize>(v: &[f64]) -> ([f64; L], [f64; L]) {
+    let (mut lo, mut hi) = ([f64::INFINITY; L], [f64::NEG_INFINITY; L]);
+    for c in v.chunks_exact(L) {
+        for l in 0..L {
+            lo[l] = if c[l] < lo[l] { c[l] } else { lo[l] };
+            hi[l] = if c[l] > hi[l] { c[l] } else { hi[l] };
+        }
+    }
+    (lo, hi)
 }
 
 /// The 8 half-size children of an `S³` Bernstein patch into `out` (child
@@ -417,8 +424,6 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
     let (mut lanes, mut scratch) = (vec![0.0; n * L], vec![0.0; n * L]);
     let mut patch = vec![0.0; n];
     let mut cells = cells.peekable();
-    let coeffs = field.coeffs();
-    let (data, sy, sz) = (coeffs.data(), coeffs.stride(1), coeffs.stride(2));
     while cells.peek().is_some() {
         let mut len = 0;
         for (slot, i) in group.iter_mut().zip(&mut cells) {
@@ -431,16 +436,12 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
             let base: [usize; L] = std::array::from_fn(|l| {
                 field.support_offset(cell_at(lattice.cells, group[l.min(len - 1)]))
             });
-            let span = (S - 1) * (sy + sz) + S;
-            assert!(
-                base.iter().all(|&b| b + span <= data.len()),
-                "support inside the coefficients"
-            );
+            let (data, sy, sz) = field.lane_rows::<S, L>(&base);
             for k in 0..S {
                 for j in 0..S {
-                    // SAFETY: every row of every lane lies below
-                    // `base + span`, checked above, and `L` is the lane
-                    // count `with_isa!` chose for this CPU.
+                    // SAFETY: every row of every lane lies inside `data`
+                    // (checked by `lane_rows`), and `L` is the lane count
+                    // `with_isa!` chose for this CPU.
                     let r =
                         unsafe { crate::simd::gather_rows4::<T, L>(data, &base, j * sy + k * sz) };
                     for (i, row) in r.iter().enumerate() {
@@ -484,13 +485,7 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
 /// `l` at `e·L + l`), lane by lane the same test.
 #[inline(always)]
 fn straddles_lanes<const L: usize>(v: &[f64], eps: f64) -> [bool; L] {
-    let (mut lo, mut hi) = ([f64::INFINITY; L], [f64::NEG_INFINITY; L]);
-    for c in v.chunks_exact(L) {
-        for l in 0..L {
-            lo[l] = if c[l] < lo[l] { c[l] } else { lo[l] };
-            hi[l] = if c[l] > hi[l] { c[l] } else { hi[l] };
-        }
-    }
+    let (lo, hi) = lane_extremes::<L>(v);
     std::array::from_fn(|l| lo[l] <= eps && hi[l] > -eps)
 }
 

@@ -136,10 +136,11 @@ unsafe fn halve_z(p: &Patch) -> (Patch, Patch) {
 }
 
 /// The eight half-size children of `p` (child `x + 2y + 4z` into
-/// `out[x + 2y + 4z]`), halved along x, then y, then z (the scalar
-/// `octants`' order), and the bits of those that straddle the iso-value.
+/// `out[x + 2y + 4z]` when `out` is given), halved along x, then y, then z
+/// (the scalar `octants`' order), and the bits of those that straddle the
+/// iso-value. Inlined, so with `None` the children are never stored.
 #[inline(always)]
-unsafe fn octants(p: &Patch, eps: f64, out: &mut [Patch; 8]) -> u8 {
+unsafe fn octants(p: &Patch, eps: f64, mut out: Option<&mut [Patch; 8]>) -> u8 {
     // SAFETY: as above.
     unsafe {
         let mut bits = 0u8;
@@ -150,27 +151,10 @@ unsafe fn octants(p: &Patch, eps: f64, out: &mut [Patch; 8]) -> u8 {
                 let (z0, z1) = halve_z(yj);
                 bits |= (straddles(&z0, eps) as u8) << (i + 2 * j);
                 bits |= (straddles(&z1, eps) as u8) << (i + 2 * j + 4);
-                out[i + 2 * j] = z0;
-                out[i + 2 * j + 4] = z1;
-            }
-        }
-        bits
-    }
-}
-
-/// [`octants`]' straddle bits alone.
-#[inline(always)]
-unsafe fn straddling_children(p: &Patch, eps: f64) -> u8 {
-    // SAFETY: as above.
-    unsafe {
-        let mut bits = 0u8;
-        let (x0, x1) = halve_x(p);
-        for (i, xi) in [x0, x1].iter().enumerate() {
-            let (y0, y1) = halve_y(xi);
-            for (j, yj) in [y0, y1].iter().enumerate() {
-                let (z0, z1) = halve_z(yj);
-                bits |= (straddles(&z0, eps) as u8) << (i + 2 * j);
-                bits |= (straddles(&z1, eps) as u8) << (i + 2 * j + 4);
+                if let Some(out) = out.as_deref_mut() {
+                    out[i + 2 * j] = z0;
+                    out[i + 2 * j + 4] = z1;
+                }
             }
         }
         bits
@@ -211,13 +195,13 @@ pub unsafe fn mask(b: &[f64; 64], eps: f64) -> u64 {
             return 0;
         }
         let mut halves = [[_mm512_setzero_pd(); 8]; 8];
-        let straddling = octants(&p, eps, &mut halves);
+        let straddling = octants(&p, eps, Some(&mut halves));
         let mut mask = 0u64;
         for (h, half) in halves.iter().enumerate() {
             if straddling >> h & 1 == 0 {
                 continue;
             }
-            let quarters = straddling_children(half, eps);
+            let quarters = octants(half, eps, None);
             let (hx, hy, hz) = (h & 1, h >> 1 & 1, h >> 2);
             for q in 0..8 {
                 if quarters >> q & 1 != 0 {
@@ -251,7 +235,7 @@ unsafe fn children(b: &[f64; 64]) -> Vec<f64> {
     unsafe {
         let p = load(b);
         let mut halves = [[_mm512_setzero_pd(); 8]; 8];
-        octants(&p, 0.0, &mut halves);
+        octants(&p, 0.0, Some(&mut halves));
         let mut out = vec![0.0; 512];
         for (c, half) in halves.iter().enumerate() {
             for (r, v) in half.iter().enumerate() {

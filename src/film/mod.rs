@@ -218,25 +218,14 @@ impl Film {
     /// rectangle and the bands come in increasing, disjoint row order inside
     /// the window; `None` otherwise.
     fn bands<'a>(&self, outs: &'a [TileOut]) -> Option<Vec<(u32, u32, &'a [TileOut])>> {
-        let mut bands: Vec<(u32, u32, &[TileOut])> = Vec::new();
-        let mut first = 0;
-        for (k, o) in outs.iter().enumerate() {
-            let Region::Rect(t) = &o.region else {
-                return None;
-            };
-            let same = k > first
-                && matches!(&outs[first].region, Region::Rect(f) if (f.y0, f.y1) == (t.y0, t.y1));
-            if k > first && !same {
-                let Region::Rect(f) = &outs[first].region else {
-                    unreachable!("every region so far is a rectangle")
-                };
-                bands.push((f.y0, f.y1, &outs[first..k]));
-                first = k;
-            }
-            if k + 1 == outs.len() {
-                bands.push((t.y0, t.y1, &outs[first..]));
-            }
-        }
+        let rows = |o: &TileOut| match &o.region {
+            Region::Rect(t) => Some((t.y0, t.y1)),
+            Region::List(_) => None,
+        };
+        let bands = outs
+            .chunk_by(|a, b| rows(a) == rows(b))
+            .map(|run| rows(&run[0]).map(|(y0, y1)| (y0, y1, run)))
+            .collect::<Option<Vec<_>>>()?;
         let ordered = bands.windows(2).all(|b| b[0].1 <= b[1].0)
             && bands.first().is_some_and(|b| b.0 >= self.origin[1])
             && bands

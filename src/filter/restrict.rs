@@ -141,7 +141,7 @@ impl<T: Coefficient> Field<T> {
         #[cfg(target_arch = "x86_64")]
         if S == 4 && L == 8 && M::FUSED && crate::simd::Isa::current() == crate::simd::Isa::Avx512 {
             let kernel = self.kernel();
-            let (data, sy, sz) = self.lane_rows::<S, L>(seg);
+            let (data, sy, sz) = self.lane_rows::<S, L>(&seg.base);
             let mut poly = [[0.0; 4]; 4];
             for (j, p) in poly.iter_mut().enumerate() {
                 p.copy_from_slice(&kernel.weight_poly(j)[..4]);
@@ -181,22 +181,20 @@ impl<T: Coefficient> Field<T> {
     }
 
     /// The coefficients and their row and plane strides, once every lane's
-    /// support-`S` neighbourhood is checked to lie inside them (the lane
-    /// kernels index rows from `seg.base` without further checks).
+    /// support-`S` neighbourhood (from offsets `base`, as
+    /// [`Field::support_offset`] gives them) is checked to lie inside them:
+    /// the lane kernels index rows from `base` without further checks.
     #[inline(always)]
-    fn lane_rows<const S: usize, const L: usize>(
+    pub(crate) fn lane_rows<const S: usize, const L: usize>(
         &self,
-        seg: &LaneSegments<L>,
+        base: &[usize; L],
     ) -> (&[T], usize, usize) {
         let coeffs = self.coeffs();
         let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
         let data = coeffs.data();
         let span = (S - 1) * (sy + sz) + S;
-        for l in 0..L {
-            assert!(
-                seg.base[l] + span <= data.len(),
-                "lane neighbourhood inside the grid"
-            );
+        for &b in base {
+            assert!(b + span <= data.len(), "lane neighbourhood inside the grid");
         }
         (data, sy, sz)
     }
@@ -211,7 +209,7 @@ impl<T: Coefficient> Field<T> {
         out: &mut [[f64; L]; N],
     ) {
         let kernel = self.kernel();
-        let (data, sy, sz) = self.lane_rows::<S, L>(seg);
+        let (data, sy, sz) = self.lane_rows::<S, L>(&seg.base);
         // w[a][j][m][lane]: weight polynomial j of axis a composed with the segment.
         let mut w = [[[[0.0f64; L]; S]; S]; 3];
         for a in 0..3 {

@@ -72,7 +72,7 @@ impl Proximity {
             let mut maps = vec![0u8; 8 * bricked.len()];
             // The lane walk gathers a byte per step from anywhere in them:
             // huge pages spare it most TLB misses on large lattices
-            // (BENCHMARKS.md: teapot traverse −10% single thread). The
+            // (BENCHMARKS.md: teapot traverse 8–10% less single thread). The
             // price is paid here, once: on a 2-core VM some builds waited
             // for their huge pages (teapot: the octree step 175–211 ms in
             // 9 of 12 runs, 269–325 in 3, against 189–215 without; the
