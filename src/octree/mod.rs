@@ -95,6 +95,9 @@ pub struct Octree {
     /// traversal step is one byte load instead of a walk down the tree.
     /// Stored in 4³ bricks ([`Bricked`]) for locality along rays.
     skip: Vec<u8>,
+    /// The same answers per 2³ block of a brick ([`Octree::block_map`]):
+    /// an eighth of the entries at twice the size, for the lane walk.
+    blocks: Vec<u16>,
     bricked: Bricked,
     /// Box of cells holding every tag ([`Tags::bounds`]).
     bounds: Option<[[usize; 3]; 2]>,
@@ -125,11 +128,13 @@ impl Octree {
         }
         let bricked = Bricked::new(tags.cells);
         let skip = flatten(&tags, &levels, &bricked);
+        let blocks = block_map(&skip, &bricked, tags.cells);
         let bounds = tags.bounds();
         Octree {
             tags,
             levels,
             skip,
+            blocks,
             bricked,
             bounds,
         }
@@ -156,6 +161,27 @@ impl Octree {
         &self.skip
     }
 
+    /// [`Octree::skip_map`] per 2³ block, for lane code that gathers it:
+    /// entry `8·brick + b` (`b`: bit 0, 1, 2 for the block's upper half
+    /// along x, y, z in its brick) is the level every cell of an empty
+    /// block shares (at least 1), or [`OCCUPIED`] plus a bit per tagged
+    /// cell (bit `(x & 1) | (y & 1) << 1 | (z & 1) << 2`; the block's other
+    /// cells have level 0). The walk's byte for a cell follows from its
+    /// entry ([`Octree::skip_byte_from_blocks`]), so a walk over either map
+    /// visits the same cells; this one is a quarter the size (the teapot's
+    /// 2.9 MB against 11.5), so more of it stays in cache.
+    pub fn block_map(&self) -> &[u16] {
+        &self.blocks
+    }
+
+    /// The skip byte of cell `c` (in range) from [`Octree::block_map`].
+    #[inline(always)]
+    pub fn skip_byte_from_blocks(&self, c: [i64; 3]) -> u8 {
+        let i = self.bricked.index(c);
+        let e = self.blocks[block_slot(i)];
+        decode_block(e, cell_bit(i))
+    }
+
     /// The brick layout of [`Octree::skip_map`].
     pub fn bricked(&self) -> Bricked {
         self.bricked
@@ -165,6 +191,7 @@ impl Octree {
         self.tags.bytes()
             + self.levels.iter().map(|l| l.words.len() * 8).sum::<usize>()
             + self.skip.len()
+            + self.blocks.len() * 2
     }
 
     /// The occupied blocks of `2^level` cells (`1 ≤ level ≤ top()`), as
@@ -229,6 +256,84 @@ impl Octree {
         }
         Some(l)
     }
+}
+
+/// Marks an occupied 2³ block in [`Octree::block_map`]; its low 8 bits say
+/// which cells are tagged. Above every level (a level is below 64).
+pub const OCCUPIED: u16 = 0x100;
+
+/// [`Octree::block_map`]'s entry of the cell in bricked slot `i`.
+#[inline(always)]
+pub fn block_slot(i: usize) -> usize {
+    // Bit 1 of the within-brick x, y and z (bits 1, 3, 5 of the slot).
+    (i >> 6 << 3) | ((i >> 1) & 1) | ((i >> 2) & 2) | ((i >> 3) & 4)
+}
+
+/// The bit of the cell in bricked slot `i` within its 2³ block's entry.
+#[inline(always)]
+pub fn cell_bit(i: usize) -> u32 {
+    // Bit 0 of the within-brick x, y and z (bits 0, 2, 4 of the slot).
+    ((i & 1) | ((i >> 1) & 2) | ((i >> 2) & 4)) as u32
+}
+
+/// The skip byte of cell bit `bit` of a block entry `e`.
+#[inline(always)]
+pub fn decode_block(e: u16, bit: u32) -> u8 {
+    if e >= OCCUPIED {
+        if (e >> bit) & 1 == 1 { TAGGED } else { 0 }
+    } else {
+        e as u8
+    }
+}
+
+/// [`Octree::block_map`] from the skip map: in an empty 2³ block every cell
+/// has the brick's level (at least 1); in an occupied one a cell is tagged
+/// or at level 0. Padding cells (outside the lattice) are never visited and
+/// not read.
+fn block_map(skip: &[u8], bricked: &Bricked, cells: [usize; 3]) -> Vec<u16> {
+    let mut blocks = vec![0u16; skip.len() / 8];
+    crate::heap::advise_huge_pages(&mut blocks);
+    blocks
+        .par_chunks_mut(8)
+        .zip(skip.par_chunks(64))
+        .enumerate()
+        .for_each(|(brick, (out, bytes))| {
+            // Most bricks are one empty block of a level (at least 1): all
+            // their cells share it.
+            if bytes[0] != 0 && bytes[0] != TAGGED && bytes.iter().all(|&b| b == bytes[0]) {
+                out.fill(bytes[0] as u16);
+                return;
+            }
+            let origin = bricked.brick_origin(brick);
+            // Per block: occupied, its tagged cells, the level of its cells.
+            let mut occupied = [false; 8];
+            let mut tagged = [0u16; 8];
+            let mut level = [0u16; 8];
+            for (k, &b) in bytes.iter().enumerate() {
+                let c = Bricked::cell_in(origin, k);
+                if (0..3).any(|a| c[a] >= cells[a]) {
+                    continue;
+                }
+                let j = block_slot(k) & 7;
+                match b {
+                    TAGGED => {
+                        occupied[j] = true;
+                        tagged[j] |= 1 << cell_bit(k);
+                    }
+                    0 => occupied[j] = true,
+                    l => level[j] = l as u16,
+                }
+            }
+            for j in 0..8 {
+                out[j] = if occupied[j] {
+                    debug_assert_eq!(level[j], 0, "a level beside a tagged cell");
+                    OCCUPIED | tagged[j]
+                } else {
+                    level[j]
+                };
+            }
+        });
+    blocks
 }
 
 /// Per cell, the level of the largest empty aligned block holding it (the
@@ -328,5 +433,52 @@ mod tests {
         assert_eq!(o.skip_level([12, 12, 12], 2), Some(3));
         // A leaf level at the root makes it a plain DDA over the tags.
         assert_eq!(o.skip_level([12, 12, 12], o.top()), Some(0));
+    }
+
+    /// The block map gives every cell's skip byte: over scattered tags on
+    /// lattices with partial bricks and 2³ blocks, one cell, and none.
+    #[test]
+    fn block_map_gives_the_skip_bytes() {
+        let mut checked = [0usize; 3];
+        for (cells, seed) in [
+            ([13, 9, 5], 1u64),
+            ([31, 17, 22], 2),
+            ([1, 1, 1], 3),
+            ([2, 7, 1], 4),
+        ] {
+            for density in [0.0, 0.002, 0.05, 0.5] {
+                let n: usize = cells.iter().product();
+                let on: Vec<[usize; 3]> = (0..n)
+                    .filter(|&k| crate::phantom::uniform(seed, k as u64) < density)
+                    .map(|k| {
+                        [
+                            k % cells[0],
+                            k / cells[0] % cells[1],
+                            k / (cells[0] * cells[1]),
+                        ]
+                    })
+                    .collect();
+                let o = Octree::build(tags_with(cells, &on));
+                assert_eq!(o.block_map().len() * 8, o.skip_map().len());
+                for z in 0..cells[2] as i64 {
+                    for y in 0..cells[1] as i64 {
+                        for x in 0..cells[0] as i64 {
+                            let b = o.skip_byte([x, y, z]);
+                            assert_eq!(
+                                o.skip_byte_from_blocks([x, y, z]),
+                                b,
+                                "{cells:?} {x},{y},{z}"
+                            );
+                            checked[match b {
+                                TAGGED => 0,
+                                0 => 1,
+                                _ => 2,
+                            }] += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(checked.iter().all(|&k| k > 100), "{checked:?}");
     }
 }
