@@ -239,6 +239,18 @@ struct Space<'a, R> {
     masks: Option<(&'a [u64], &'a [u32], &'a [u64])>,
 }
 
+impl<'a, R> Space<'a, R> {
+    /// The same lattice and masks with another reach.
+    fn with_reach<Q>(&self, reach: Q) -> Space<'a, Q> {
+        Space {
+            n: self.n,
+            bricks: self.bricks,
+            reach,
+            masks: self.masks,
+        }
+    }
+}
+
 /// A byte per cell (bricked, as the tagged-cell index) saying how far the
 /// empty space around it reaches, and the box a lane may jump over from it:
 /// the lane form of [`super::EmptySpace`].
@@ -308,10 +320,10 @@ impl SkipBytes for ByteMap<'_> {
 /// lattice, whose byte map the walk's gathers read far out of cache. The
 /// same bytes from a quarter of the memory (teapot 2.9 MB against 11.5),
 /// for a few more instructions a step. Single thread, 3 alternating runs
-/// of 4 frames against the byte map: traverse teapot 103.5–104.9 → 98.1–99.4
-/// ms, cranium 61.7–66.2 → 58.4–59.3; but the sphere (a 262 KB byte map,
-/// in cache) 26.7–26.9 → 28.0–28.3, so small lattices keep the byte map
-/// ([`BLOCK_MAP_ABOVE`]).
+/// of 4 frames against the byte map: traverse teapot 101.4–102.6 →
+/// 96.9–99.4 ms, cranium 61.6–64.3 → 58.1–59.6; but the sphere (a 262 KB
+/// byte map, in cache) 26.7–26.9 → 28.0–28.3 (4 runs of 10), so small
+/// lattices keep the byte map ([`BLOCK_MAP_ABOVE`]).
 struct BlockMap<'a>(&'a [u16]);
 
 impl SkipBytes for BlockMap<'_> {
@@ -954,38 +966,25 @@ unsafe fn walk_octree_on<T: Coefficient>(
     c: &mut Counters,
 ) {
     let b = tree.bricked().bricks();
-    let n = ctx.lattice.cells.map(|n| _mm512_set1_epi64(n as i64));
-    let bricks = [
-        _mm512_set1_epi64(b[0] as i64),
-        _mm512_set1_epi64(b[1] as i64),
-    ];
+    let space = Space {
+        n: ctx.lattice.cells.map(|n| _mm512_set1_epi64(n as i64)),
+        bricks: [
+            _mm512_set1_epi64(b[0] as i64),
+            _mm512_set1_epi64(b[1] as i64),
+        ],
+        reach: (),
+        masks: lane_masks(ctx),
+    };
     let leaf_level = _mm512_set1_epi64(leaf_level as i64);
-    let masks = lane_masks(ctx);
     STAGED.with_borrow_mut(|staged| {
         // SAFETY (both): the caller checked the features.
         if block_map {
-            let reach = Blocks {
-                map: BlockMap(tree.block_map()),
-                leaf_level,
-            };
-            let space = Space {
-                n,
-                bricks,
-                reach,
-                masks,
-            };
+            let map = BlockMap(tree.block_map());
+            let space = space.with_reach(Blocks { map, leaf_level });
             unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
         } else {
-            let reach = Blocks {
-                map: ByteMap(tree.skip_map()),
-                leaf_level,
-            };
-            let space = Space {
-                n,
-                bricks,
-                reach,
-                masks,
-            };
+            let map = ByteMap(tree.skip_map());
+            let space = space.with_reach(Blocks { map, leaf_level });
             unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
         }
     });
