@@ -30,12 +30,13 @@ use std::sync::OnceLock;
 use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
 use super::wide::{
-    CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks, layout_fits,
+    BLOCK_MAP_ABOVE, CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks,
+    layout_fits,
 };
 use crate::classify::bezier::SUB;
 use crate::filter::coeffs::Coefficient;
 use crate::octree::distance::Proximity;
-use crate::octree::{Octree, TAGGED};
+use crate::octree::{OCCUPIED, Octree, TAGGED};
 use crate::render::stats::Counters;
 
 const LANES: usize = 4;
@@ -215,13 +216,23 @@ struct Space<'a, R> {
     masks: Option<(&'a [u64], &'a [u32], &'a [u64])>,
 }
 
+impl<'a, R> Space<'a, R> {
+    /// The same lattice and masks with another reach.
+    fn with_reach<Q>(&self, reach: Q) -> Space<'a, Q> {
+        Space {
+            n: self.n,
+            bricks: self.bricks,
+            reach,
+            masks: self.masks,
+        }
+    }
+}
+
 /// [`super::wide`]'s `LaneReach` in four lanes: the byte per cell saying how
 /// far the empty space around it reaches, and the box a lane may jump over.
 trait LaneReach {
-    /// The bytes the lanes gather from; a multiple of 4 long.
-    fn bytes(&self) -> &[u8];
-    /// Each lane's byte index, from its cell's bricked slot.
-    unsafe fn index(&self, l: &Lanes, slot: __m256i) -> __m256i;
+    /// Each lane of `go`'s byte, from its cell's bricked slot.
+    unsafe fn byte(&self, l: &Lanes, slot: __m256i, go: __m256i) -> __m256i;
     /// The lanes of `go` whose byte marks a tagged cell, and each lane's
     /// reach (that of the cell alone where tagged).
     unsafe fn reach(&self, go: __m256i, byte: __m256i) -> (__m256i, __m256i);
@@ -230,20 +241,109 @@ trait LaneReach {
     unsafe fn exit(&self, l: &Lanes, reach: __m256i) -> (__m256d, [__m256i; 3]);
 }
 
-/// The octree's skip map, a block level per cell.
-struct Blocks<'a> {
-    skip: &'a [u8],
+/// The byte at `index` of `bytes` (a multiple of 4 long) for each lane of
+/// `go`, from the aligned dword holding it.
+///
+/// # Safety
+/// AVX2; every lane of `go` indexes `bytes`.
+#[inline(always)]
+unsafe fn gather_bytes(bytes: &[u8], index: __m256i, go: __m256i) -> __m256i {
+    // SAFETY: as the caller guarantees; the dword holding an indexed byte
+    // lies in `bytes`, whose length is a multiple of 4.
+    unsafe {
+        let dword = _mm256_mask_i64gather_epi32::<4>(
+            _mm_setzero_si128(),
+            bytes.as_ptr() as *const i32,
+            _mm256_srli_epi64::<2>(index),
+            narrow(go),
+        );
+        let shift = _mm256_slli_epi64::<3>(_mm256_and_si256(index, _mm256_set1_epi64x(3)));
+        _mm256_and_si256(
+            _mm256_srlv_epi64(_mm256_cvtepu32_epi64(dword), shift),
+            _mm256_set1_epi64x(0xFF),
+        )
+    }
+}
+
+/// The octree's blocks, a block level per cell, from the byte map or the
+/// block map ([`super::wide`]'s `Blocks`).
+struct Blocks<M> {
+    map: M,
     leaf_level: __m256i,
 }
 
-impl LaneReach for Blocks<'_> {
-    fn bytes(&self) -> &[u8] {
-        self.skip
-    }
+/// Where [`Blocks`] reads each lane's skip byte.
+trait SkipBytes {
+    /// The skip byte of each lane of `go`, from its cell's bricked slot.
+    unsafe fn byte(&self, slot: __m256i, go: __m256i) -> __m256i;
+}
 
+/// The flattened skip map, a byte per cell ([`Octree::skip_map`]).
+struct ByteMap<'a>(&'a [u8]);
+
+impl SkipBytes for ByteMap<'_> {
     #[inline(always)]
-    unsafe fn index(&self, _: &Lanes, slot: __m256i) -> __m256i {
-        slot
+    unsafe fn byte(&self, slot: __m256i, go: __m256i) -> __m256i {
+        // SAFETY: called only from the walk, which runs with AVX2; a
+        // lattice cell's slot lies in the map (`layout_fits`).
+        unsafe { gather_bytes(self.0, slot, go) }
+    }
+}
+
+/// The octree's entries per 2³ block ([`Octree::block_map`]), decoded as
+/// [`super::wide`]'s `BlockMap` decodes them, for lattices whose byte map
+/// is larger than [`BLOCK_MAP_ABOVE`]. `SNELL_ISA=avx2`, single thread, 3
+/// alternating runs of 3 frames against the byte map: traverse teapot
+/// 130.2–141.2 → 126.8–133.2 ms, cranium 82.6–87.1 → 76.0–79.8 (2 runs).
+struct BlockMap<'a>(&'a [u16]);
+
+impl SkipBytes for BlockMap<'_> {
+    /// [`Octree::skip_byte_from_blocks`] per lane.
+    #[inline(always)]
+    unsafe fn byte(&self, slot: __m256i, go: __m256i) -> __m256i {
+        // SAFETY: called only from the walk, which runs with AVX2; a
+        // lattice cell's slot has its block's entry in the map, whose
+        // length is a multiple of 8 (`layout_fits`), so the dword holding
+        // it does too.
+        unsafe {
+            let bit_at = |from: u32, to: u32| {
+                let b = _mm256_srlv_epi64(slot, _mm256_set1_epi64x((from - to) as i64));
+                _mm256_and_si256(b, _mm256_set1_epi64x(1 << to))
+            };
+            // [`crate::octree::block_slot`]: bits 1, 3, 5 of the slot.
+            let entry = _mm256_or_si256(
+                _mm256_slli_epi64::<3>(_mm256_srli_epi64::<6>(slot)),
+                _mm256_or_si256(bit_at(1, 0), _mm256_or_si256(bit_at(3, 1), bit_at(5, 2))),
+            );
+            let dword = _mm256_mask_i64gather_epi32::<4>(
+                _mm_setzero_si128(),
+                self.0.as_ptr() as *const i32,
+                _mm256_srli_epi64::<1>(entry),
+                narrow(go),
+            );
+            let shift = _mm256_slli_epi64::<4>(_mm256_and_si256(entry, _mm256_set1_epi64x(1)));
+            let e = _mm256_and_si256(
+                _mm256_srlv_epi64(_mm256_cvtepu32_epi64(dword), shift),
+                _mm256_set1_epi64x(0xFFFF),
+            );
+            // [`crate::octree::cell_bit`]: bits 0, 2, 4 of the slot.
+            let bit = _mm256_or_si256(bit_at(0, 0), _mm256_or_si256(bit_at(2, 1), bit_at(4, 2)));
+            // Entries are below 2¹⁶: the signed compare is the unsigned one.
+            let occupied = _mm256_cmpgt_epi64(e, _mm256_set1_epi64x(OCCUPIED as i64 - 1));
+            let one = _mm256_set1_epi64x(1);
+            let tagged = _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_srlv_epi64(e, bit), one), one);
+            // Occupied: TAGGED or 0; empty: the level.
+            let occ = _mm256_and_si256(tagged, _mm256_set1_epi64x(TAGGED as i64));
+            sel(occupied, occ, e)
+        }
+    }
+}
+
+impl<M: SkipBytes> LaneReach for Blocks<M> {
+    #[inline(always)]
+    unsafe fn byte(&self, _: &Lanes, slot: __m256i, go: __m256i) -> __m256i {
+        // SAFETY: as the caller guarantees.
+        unsafe { self.map.byte(slot, go) }
     }
 
     #[inline(always)]
@@ -281,20 +381,17 @@ struct Cubes<'a> {
 }
 
 impl LaneReach for Cubes<'_> {
-    fn bytes(&self) -> &[u8] {
-        self.bytes
-    }
-
     #[inline(always)]
-    unsafe fn index(&self, l: &Lanes, slot: __m256i) -> __m256i {
-        // SAFETY: as above.
+    unsafe fn byte(&self, l: &Lanes, slot: __m256i, go: __m256i) -> __m256i {
+        // SAFETY: as above; the lanes of `go` hold cells of the lattice,
+        // whose slots lie in each octant's map (`distance_layout_fits`).
         unsafe {
             let mut index = slot;
             for a in 0..3 {
                 let down = of_pd(_mm256_cmp_pd::<_CMP_LT_OQ>(l.du[a], _mm256_setzero_pd()));
                 index = _mm256_add_epi64(index, _mm256_and_si256(down, self.octant_step[a]));
             }
-            index
+            gather_bytes(self.bytes, index, go)
         }
     }
 
@@ -576,21 +673,8 @@ unsafe fn step<R: LaneReach>(s: &Space<R>, l: &mut Lanes, live: u32, c: &mut Cou
         c.cells_visited += go_bits.count_ones() as u64;
 
         let slot = bricked_index(&s.bricks, &l.cell);
-        let index = s.reach.index(l, slot);
-        // SAFETY: the lanes of `go` hold cells of the lattice, whose slots
-        // lie in the map (in each octant's); its length is a multiple of 4,
-        // so the dword holding a byte does too.
-        let dword = _mm256_mask_i64gather_epi32::<4>(
-            _mm_setzero_si128(),
-            s.reach.bytes().as_ptr() as *const i32,
-            _mm256_srli_epi64::<2>(index),
-            narrow(go),
-        );
-        let shift = _mm256_slli_epi64::<3>(_mm256_and_si256(index, _mm256_set1_epi64x(3)));
-        let byte = _mm256_and_si256(
-            _mm256_srlv_epi64(_mm256_cvtepu32_epi64(dword), shift),
-            _mm256_set1_epi64x(0xFF),
-        );
+        // SAFETY: the lanes of `go` hold cells of the lattice.
+        let byte = s.reach.byte(l, slot, go);
         let (tagged, reach) = s.reach.reach(go, byte);
 
         let (solve, skipped, t0, t1) = if bits(tagged) == 0 {
@@ -715,7 +799,28 @@ unsafe fn refill(l: &mut Lanes, free: u32, staged: &Staged, pos: &mut usize) -> 
 #[target_feature(enable = "avx2,bmi1,bmi2,popcnt,lzcnt")]
 pub unsafe fn walk_octree<T: Coefficient>(
     ctx: &Ctx<T>,
+    tree: (&Octree, u32),
+    rays: &mut Rays,
+    input: &[u32],
+    solve: &mut Queue,
+    record: &mut Queue,
+    c: &mut Counters,
+) {
+    let block_map = tree.0.skip_map().len() > BLOCK_MAP_ABOVE;
+    // SAFETY: the caller's contract.
+    unsafe { walk_octree_on(ctx, tree, block_map, rays, input, solve, record, c) }
+}
+
+/// [`walk_octree`] reading the block map (`block_map`) or the byte map.
+///
+/// # Safety
+/// [`fits`] must be true.
+#[target_feature(enable = "avx2,bmi1,bmi2,popcnt,lzcnt")]
+#[allow(clippy::too_many_arguments)]
+unsafe fn walk_octree_on<T: Coefficient>(
+    ctx: &Ctx<T>,
     (tree, leaf_level): (&Octree, u32),
+    block_map: bool,
     rays: &mut Rays,
     input: &[u32],
     solve: &mut Queue,
@@ -729,15 +834,21 @@ pub unsafe fn walk_octree<T: Coefficient>(
             _mm256_set1_epi64x(b[0] as i64),
             _mm256_set1_epi64x(b[1] as i64),
         ],
-        reach: Blocks {
-            skip: tree.skip_map(),
-            leaf_level: _mm256_set1_epi64x(leaf_level as i64),
-        },
+        reach: (),
         masks: lane_masks(ctx),
     };
+    let leaf_level = _mm256_set1_epi64x(leaf_level as i64);
     STAGED.with_borrow_mut(|staged| {
-        // SAFETY: the caller checked the features.
-        unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
+        // SAFETY (both): the caller checked the features.
+        if block_map {
+            let map = BlockMap(tree.block_map());
+            let space = space.with_reach(Blocks { map, leaf_level });
+            unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
+        } else {
+            let map = ByteMap(tree.skip_map());
+            let space = space.with_reach(Blocks { map, leaf_level });
+            unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
+        }
     });
 }
 
@@ -878,14 +989,17 @@ mod tests {
         if !std::arch::is_x86_feature_detected!("avx2") {
             return;
         }
-        super::super::lane_check::every_ray_walks_as_in_the_scalar_walk::<Avx2>();
+        super::super::lane_check::every_ray_walks_as_in_the_scalar_walk::<Avx2<false>>();
+        super::super::lane_check::every_ray_walks_as_in_the_scalar_walk::<Avx2<true>>();
     }
 
     /// The AVX2 walk, for the shared check; it runs wherever the CPU has
-    /// AVX2, also where the renderer would take the AVX-512 walk.
-    struct Avx2;
+    /// AVX2, also where the renderer would take the AVX-512 walk. The
+    /// octree's blocks come from the block map (`BLOCKS`) or the byte map,
+    /// whatever the lattice size.
+    struct Avx2<const BLOCKS: bool>;
 
-    impl super::super::lane_check::LaneWalk for Avx2 {
+    impl<const BLOCKS: bool> super::super::lane_check::LaneWalk for Avx2<BLOCKS> {
         unsafe fn octree<T: Coefficient>(
             ctx: &Ctx<T>,
             tree: (&Octree, u32),
@@ -897,7 +1011,7 @@ mod tests {
         ) {
             // SAFETY: the CPU has AVX2 (the test checked), and the caller
             // checked the layout.
-            unsafe { walk_octree(ctx, tree, rays, input, solve, record, c) }
+            unsafe { walk_octree_on(ctx, tree, BLOCKS, rays, input, solve, record, c) }
         }
 
         unsafe fn distance<T: Coefficient>(

@@ -370,7 +370,7 @@ impl SkipBytes for BlockMap<'_> {
 /// where the byte map leaves a core's L2 cache (1–4 MiB on the machines
 /// measured). The sphere's 262 KB stays below, the cranium's 7 MB and the
 /// teapot's 11.5 MB above.
-const BLOCK_MAP_ABOVE: usize = 2 << 20;
+pub(super) const BLOCK_MAP_ABOVE: usize = 2 << 20;
 
 impl<M: SkipBytes> LaneReach for Blocks<M> {
     #[inline(always)]
