@@ -314,7 +314,8 @@ fn block_map(skip: &[u8], bricked: &Bricked, cells: [usize; 3]) -> Vec<u16> {
                 if (0..3).any(|a| c[a] >= cells[a]) {
                     continue;
                 }
-                let j = block_slot(k) & 7;
+                // Within the brick (`k < 64`), the block's entry is below 8.
+                let j = block_slot(k);
                 match b {
                     TAGGED => {
                         occupied[j] = true;

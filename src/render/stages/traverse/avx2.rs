@@ -30,8 +30,8 @@ use std::sync::OnceLock;
 use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
 use super::wide::{
-    BLOCK_MAP_ABOVE, CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks,
-    layout_fits,
+    CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks, layout_fits,
+    reads_block_map,
 };
 use crate::classify::bezier::SUB;
 use crate::filter::coeffs::Coefficient;
@@ -291,8 +291,8 @@ impl SkipBytes for ByteMap<'_> {
 }
 
 /// The octree's entries per 2³ block ([`Octree::block_map`]), decoded as
-/// [`super::wide`]'s `BlockMap` decodes them, for lattices whose byte map
-/// is larger than [`BLOCK_MAP_ABOVE`]. `SNELL_ISA=avx2`, single thread, 3
+/// [`super::wide`]'s `BlockMap` decodes them, for the lattices
+/// [`reads_block_map`] picks. `SNELL_ISA=avx2`, single thread, 3
 /// alternating runs of 3 frames against the byte map: traverse teapot
 /// 130.2–141.2 → 126.8–133.2 ms, cranium 82.6–87.1 → 76.0–79.8 (2 runs).
 struct BlockMap<'a>(&'a [u16]);
@@ -806,7 +806,7 @@ pub unsafe fn walk_octree<T: Coefficient>(
     record: &mut Queue,
     c: &mut Counters,
 ) {
-    let block_map = tree.0.skip_map().len() > BLOCK_MAP_ABOVE;
+    let block_map = reads_block_map(tree.0);
     // SAFETY: the caller's contract.
     unsafe { walk_octree_on(ctx, tree, block_map, rays, input, solve, record, c) }
 }

@@ -370,7 +370,13 @@ impl SkipBytes for BlockMap<'_> {
 /// where the byte map leaves a core's L2 cache (1–4 MiB on the machines
 /// measured). The sphere's 262 KB stays below, the cranium's 7 MB and the
 /// teapot's 11.5 MB above.
-pub(super) const BLOCK_MAP_ABOVE: usize = 2 << 20;
+const BLOCK_MAP_ABOVE: usize = 2 << 20;
+
+/// Whether the lane walks (this one and [`super::avx2`]'s) read `tree`'s
+/// block map rather than its byte map ([`BLOCK_MAP_ABOVE`]).
+pub(super) fn reads_block_map(tree: &Octree) -> bool {
+    tree.skip_map().len() > BLOCK_MAP_ABOVE
+}
 
 impl<M: SkipBytes> LaneReach for Blocks<M> {
     #[inline(always)]
@@ -944,7 +950,7 @@ pub unsafe fn walk_octree<T: Coefficient>(
     record: &mut Queue,
     c: &mut Counters,
 ) {
-    let block_map = tree.0.skip_map().len() > BLOCK_MAP_ABOVE;
+    let block_map = reads_block_map(tree.0);
     // SAFETY: the caller's contract.
     unsafe { walk_octree_on(ctx, tree, block_map, rays, input, solve, record, c) }
 }
