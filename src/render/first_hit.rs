@@ -108,6 +108,18 @@ impl FirstHit {
         let (x, y) = (pixel % self.width, pixel / self.width);
         self.t[((y / PIXEL_BLOCK) * self.cols + x / PIXEL_BLOCK) as usize]
     }
+
+    /// [`FirstHit::at`] for the eight pixels of a row from `pixel` on (those
+    /// past the row's end are not read), from one division.
+    #[inline]
+    pub fn run(&self, pixel: u32) -> [f64; 8] {
+        let (x, y) = (pixel % self.width, pixel / self.width);
+        let row = &self.t[((y / PIXEL_BLOCK) * self.cols) as usize..][..self.cols as usize];
+        std::array::from_fn(|l| {
+            let bx = ((x + l as u32) / PIXEL_BLOCK).min(self.cols - 1);
+            row[bx as usize]
+        })
+    }
 }
 
 /// The smallest ray parameter at which a primary ray can be inside the box:

@@ -6,6 +6,8 @@
 //! from a counter-based generator keyed by (seed, pixel, sample), so it is the
 //! same for any tile size or thread count.
 
+use bumpalo::collections::Vec as BVec;
+
 use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
 use super::super::tile::{Region, Sampling, Tile};
@@ -24,20 +26,36 @@ pub fn rays_per_pixel(sampling: Sampling) -> usize {
     }
 }
 
-pub fn generate<T: Coefficient>(
+/// Pixel-centre rays of up to [`RUN`] consecutive pixels of a row, from the
+/// camera: not yet in the packet, so that the entry stage can record those
+/// that go straight to the backdrop without their ever entering it.
+pub struct Run {
+    /// The first pixel's image index and output slot (the others follow).
+    pub pixel: u32,
+    pub slot: u32,
+    /// Pixels in the run.
+    pub len: usize,
+    /// Unit directions, `dir[axis][lane]` (lanes past `len` unused).
+    pub dir: [[f64; RUN]; 3],
+}
+
+/// The region's primary rays: into `rays` (their indices on `out`), or,
+/// for the pixel centres of a rectangle under a perspective camera (the
+/// usual first pass), as [`Run`]s on `runs` for the entry stage to place.
+pub fn generate<'a, T: Coefficient>(
     ctx: &Ctx<T>,
     region: &Region,
     sampling: Sampling,
     rays: &mut Rays,
     out: &mut Queue,
+    runs: &mut BVec<'a, Run>,
 ) {
     let cam = &ctx.scene.camera;
     let width = ctx.scene.width;
     if let (Sampling::Centre, Region::Rect(tile), Projection::Perspective { .. }) =
         (sampling, region, cam.projection)
     {
-        crate::with_isa!(Isa::current(), _L, _M => centre_rays(cam, *tile, width, rays, out));
-        rays.complete();
+        crate::with_isa!(Isa::current(), _L, _M => centre_runs(cam, *tile, width, runs));
         return;
     }
     // Pixels come in the region's order, which is its output's.
@@ -91,25 +109,26 @@ pub fn generate<T: Coefficient>(
     rays.complete();
 }
 
-/// Pixel-centre rays of a rectangle under a perspective camera (the usual
-/// first pass): each row in runs of [`RUN`] pixels whose directions come
-/// from [`Camera::directions`] in vector lanes, bitwise those of
+/// Pixel-centre rays of a rectangle under a perspective camera: each row in
+/// runs of [`RUN`] pixels whose directions come from
+/// [`Camera::directions`] in vector lanes, bitwise those of
 /// [`Camera::ray`].
 #[inline(always)]
-fn centre_rays(cam: &Camera, tile: Tile, width: u32, rays: &mut Rays, out: &mut Queue) {
-    let first = rays.len() as u32;
+fn centre_runs(cam: &Camera, tile: Tile, width: u32, runs: &mut BVec<Run>) {
+    runs.reserve(tile.height() as usize * tile.width().div_ceil(RUN as u32) as usize);
     for py in tile.y0..tile.y1 {
         let y = py as f64 + 0.5;
         for x0 in (tile.x0..tile.x1).step_by(RUN) {
             let xs: [f64; RUN] = std::array::from_fn(|l| (x0 + l as u32) as f64 + 0.5);
-            let d = cam.directions(&xs, y).expect("a perspective camera");
-            let len = RUN.min((tile.x1 - x0) as usize);
-            let slot = (py - tile.y0) * tile.width() + (x0 - tile.x0);
-            rays.push_centre_run((py * width + x0, slot), len, cam.position, &d);
+            runs.push(Run {
+                pixel: py * width + x0,
+                slot: (py - tile.y0) * tile.width() + (x0 - tile.x0),
+                len: RUN.min((tile.x1 - x0) as usize),
+                dir: cam.directions(&xs, y).expect("a perspective camera"),
+            });
         }
     }
-    out.extend(first..rays.len() as u32);
 }
 
-/// Pixels per run of [`centre_rays`]: one AVX-512 vector of `f64`.
-const RUN: usize = 8;
+/// Pixels per [`Run`]: one AVX-512 vector of `f64`.
+pub const RUN: usize = 8;

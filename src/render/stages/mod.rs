@@ -5,8 +5,13 @@
 //! generate ─▶ entry ─┬─▶ traverse ─┬─▶ solve ─┬─▶ refract ─┬─▶ traverse
 //!                    │             │          └─▶ traverse  └─▶ record (max events)
 //!                    │             └─▶ record (left the volume)
-//!                    └─▶ record (missed the volume)
+//!                    └─▶ record (cannot meet the surface)
 //! ```
+//!
+//! The first pass's pixel-centre rays reach the entry stage as runs of
+//! directions, not yet in the packet; the entry stage records the ones that
+//! go straight to the backdrop itself ([`record::record_straight`]), so only
+//! rays that may meet the surface enter the packet and the queues.
 //!
 //! Stages that touch the field are generic over the kernel support `S`, so
 //! their inner loops are compiled per filter.

@@ -54,41 +54,81 @@ fn record_runs<T: Coefficient>(
         for (l, &r) in run.iter().enumerate() {
             let i = r as usize;
             let hit = match rays.fate[i] {
-                Fate::Escaped => match hits.state[l] {
-                    HitState::Undefined => {
-                        c.undefined += 1;
-                        None
-                    }
-                    HitState::Missed => {
-                        c.missed_backdrop += 1;
-                        None
-                    }
-                    HitState::Hit => Some((hits.u[l], hits.v[l])),
-                },
+                Fate::Escaped => hits.landing(l, c),
                 Fate::Terminated => None,
                 Fate::Active => {
                     c.undefined += 1;
                     None
                 }
             };
-            let local = rays.slot[i] as usize;
-            if let Some(colours) = &mut out.color {
-                let color = match hit {
-                    Some((u, v)) => backdrop.color(u, v),
-                    None => ctx.scene.background,
-                };
-                let w = rays.weight[i];
-                for k in 0..3 {
-                    colours[local][k] += w * color[k];
-                }
-            }
-            if rays.centre[i] {
-                let (u, v) = hit.unwrap_or((f64::NAN, f64::NAN));
-                out.u[local] = u as f32;
-                out.v[local] = v as f32;
-                out.events[local] = rays.events[i] as f32;
-            }
+            let ray = Recorded {
+                slot: rays.slot[i] as usize,
+                weight: rays.weight[i],
+                centre: rays.centre[i],
+                events: rays.events[i],
+            };
+            write(ctx, hit, ray, out);
         }
+    }
+}
+
+/// Records the pixel-centre primary rays of lanes `lanes` of a run (origin
+/// `org`, directions `dir[axis][lane]`, lane `l` writing output slot
+/// `slot + l`) that go straight to the backdrop from the camera: what
+/// [`record`] writes for them, without their ever entering the packet (see
+/// [`super::entry`]).
+pub fn record_straight<T: Coefficient>(
+    ctx: &Ctx<T>,
+    org: [f64; 3],
+    dir: &[[f64; RUN]; 3],
+    lanes: u8,
+    slot: u32,
+    out: &mut TileOut,
+    c: &mut Counters,
+) {
+    let o = org.map(|v| [v; RUN]);
+    let hits = backdrop_hits(&ctx.scene.backdrop, &o, dir);
+    for l in (0..RUN).filter(|&l| lanes >> l & 1 == 1) {
+        let ray = Recorded {
+            slot: slot as usize + l,
+            weight: 1.0,
+            centre: true,
+            events: 0,
+        };
+        write(ctx, hits.landing(l, c), ray, out);
+    }
+}
+
+/// What the film needs of a recorded ray besides its landing point.
+#[derive(Clone, Copy)]
+struct Recorded {
+    /// Its pixel's position in the region's output.
+    slot: usize,
+    weight: f32,
+    /// The pixel-centre ray, which writes the hit-position image.
+    centre: bool,
+    events: u32,
+}
+
+/// Writes a ray's landing point `hit` (none: it stopped, or missed the
+/// backdrop) into the tile's output: its colour's share, and for the
+/// pixel-centre ray the hit-position image.
+#[inline(always)]
+fn write<T: Coefficient>(ctx: &Ctx<T>, hit: Option<(f64, f64)>, ray: Recorded, out: &mut TileOut) {
+    if let Some(colours) = &mut out.color {
+        let color = match hit {
+            Some((u, v)) => ctx.scene.backdrop.color(u, v),
+            None => ctx.scene.background,
+        };
+        for k in 0..3 {
+            colours[ray.slot][k] += ray.weight * color[k];
+        }
+    }
+    if ray.centre {
+        let (u, v) = hit.unwrap_or((f64::NAN, f64::NAN));
+        out.u[ray.slot] = u as f32;
+        out.v[ray.slot] = v as f32;
+        out.events[ray.slot] = ray.events as f32;
     }
 }
 
@@ -107,6 +147,24 @@ struct Hits {
     u: [f64; RUN],
     v: [f64; RUN],
     state: [HitState; RUN],
+}
+
+impl Hits {
+    /// Where lane `l` lands, counting the rays that do not.
+    #[inline(always)]
+    fn landing(&self, l: usize, c: &mut Counters) -> Option<(f64, f64)> {
+        match self.state[l] {
+            HitState::Undefined => {
+                c.undefined += 1;
+                None
+            }
+            HitState::Missed => {
+                c.missed_backdrop += 1;
+                None
+            }
+            HitState::Hit => Some((self.u[l], self.v[l])),
+        }
+    }
 }
 
 /// [`Backdrop::hit`] for a run of rays in vector lanes: the same operations
