@@ -406,6 +406,160 @@ pub unsafe fn restrict_cubic_x8<T: Row4>(
     }
 }
 
+/// [`restrict_cubic_x8`] for quadratic filters (support 3: the quadratic
+/// B-spline): the monomial coefficients of `g(s) − iso` for 8 segments
+/// (`out[m][lane]`, degree 6), bitwise what
+/// [`crate::filter::Field::restrict_lanes`]'s generic loops compute with
+/// fused multiply-adds, every accumulator a register. A row of three
+/// coefficients per lane loads as the first three of a row of four
+/// ([`rows4x8_regs`]; the fourth is never used). The generic loops
+/// gathered each coefficient across the lanes and kept their accumulators
+/// in memory.
+///
+/// # Safety
+/// The CPU must have AVX-512F and FMA ([`Isa::Avx512`]), and every row
+/// `base[l] + j·sy + k·sz .. + 4` (`j, k < 3`: one value past the
+/// neighbourhood's row) must lie in `data`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,fma,f16c")]
+#[inline]
+#[allow(clippy::too_many_arguments)]
+pub unsafe fn restrict_quadratic_x8<T: Row4>(
+    data: &[T],
+    base: &[usize; 8],
+    (sy, sz): (usize, usize),
+    tau: &[[f64; 8]; 3],
+    delta: &[[f64; 8]; 3],
+    poly: &[[f64; 3]; 3],
+    iso: f64,
+    out: &mut [[f64; 8]],
+) {
+    use std::arch::x86_64::*;
+    // SAFETY: each `[f64; 8]` is 64 readable bytes.
+    let ld = |v: &[f64; 8]| unsafe { _mm512_loadu_pd(v.as_ptr()) };
+    let zero = _mm512_setzero_pd();
+    // w[a][j][m]: as in `restrict_cubic_x8`, the generic loops' Taylor
+    // shift (`k` from 1 down to `i`) and powers of delta, unrolled.
+    let mut w = [[[zero; 3]; 3]; 3];
+    for a in 0..3 {
+        let (t, dl) = (ld(&tau[a]), ld(&delta[a]));
+        let d2 = _mm512_mul_pd(dl, dl);
+        for j in 0..3 {
+            let p = &poly[j];
+            let (mut q0, mut q1) = (_mm512_set1_pd(p[0]), _mm512_set1_pd(p[1]));
+            let q2 = _mm512_set1_pd(p[2]);
+            q1 = _mm512_fmadd_pd(t, q2, q1);
+            q0 = _mm512_fmadd_pd(t, q1, q0);
+            q1 = _mm512_fmadd_pd(t, q2, q1);
+            w[a][j] = [q0, _mm512_mul_pd(q1, dl), _mm512_mul_pd(q2, d2)];
+        }
+    }
+    let mut g = [zero; 7];
+    for k in 0..3 {
+        let mut bk = [zero; 5];
+        for j in 0..3 {
+            // SAFETY: rows (and the value after each) in bounds (caller);
+            // AVX-512 (caller).
+            let c = unsafe { rows4x8_regs::<T>(data.as_ptr().wrapping_add(j * sy + k * sz), base) };
+            let mut ajk = [zero; 3];
+            for i in 0..3 {
+                for m in 0..3 {
+                    ajk[m] = _mm512_fmadd_pd(c[i], w[0][i][m], ajk[m]);
+                }
+            }
+            for m in 0..3 {
+                for n in 0..3 {
+                    bk[m + n] = _mm512_fmadd_pd(ajk[m], w[1][j][n], bk[m + n]);
+                }
+            }
+        }
+        for m in 0..5 {
+            for n in 0..3 {
+                g[m + n] = _mm512_fmadd_pd(bk[m], w[2][k][n], g[m + n]);
+            }
+        }
+    }
+    g[0] = _mm512_sub_pd(g[0], _mm512_set1_pd(iso));
+    for (o, v) in out.iter_mut().zip(g) {
+        // SAFETY: `o` is 64 writable bytes.
+        unsafe { _mm512_storeu_pd(o.as_mut_ptr(), v) };
+    }
+}
+
+/// [`crate::filter::Field::value_grad_in`] of a quadratic filter (support 3)
+/// at 8 points at once under AVX-512, bitwise its result per lane (the
+/// refract stage's gradients for the quadratic B-spline): lane `l`'s
+/// neighbourhood starts at `data[base[l]]` and its fractional position on
+/// axis `a` is `t[a][l]`; `poly[j]` is the kernel's weight polynomial `j`.
+/// The scalar function's operations in its order, none fused: the weights
+/// by Horner, each row's products summed over y and z, and its two-way
+/// dot products `(0 + w₀r₀ + w₂r₂) + (0 + w₁r₁)`. One point at a time
+/// (every filter but the cubics before this), the scalar loops were most
+/// of the quadratic spline's refract stage.
+///
+/// # Safety
+/// The CPU must have AVX-512F and F16C ([`Isa::Avx512`]), and every row
+/// `base[l] + j·sy + k·sz .. + 4` (`j, k < 3`) must lie in `data`.
+#[cfg(target_arch = "x86_64")]
+#[target_feature(enable = "avx512f,f16c")]
+#[inline]
+pub unsafe fn quadratic_value_grad_x8<T: Row4>(
+    data: &[T],
+    base: &[usize; 8],
+    (sy, sz): (usize, usize),
+    t: &[[f64; 8]; 3],
+    poly: &[[f64; 3]; 3],
+) -> ([f64; 8], [[f64; 8]; 3]) {
+    use std::arch::x86_64::*;
+    // SAFETY: each `[f64; 8]` is 64 readable bytes.
+    let ld = |v: &[f64; 8]| unsafe { _mm512_loadu_pd(v.as_ptr()) };
+    let zero = _mm512_setzero_pd();
+    let (add, mul) = (|a, b| _mm512_add_pd(a, b), |a, b| _mm512_mul_pd(a, b));
+    // `Kernel::weights_and_derivs`: `dv = dv·t + v`, `v = v·t + p[m]`.
+    let mut w = [[zero; 3]; 3];
+    let mut d = [[zero; 3]; 3];
+    for a in 0..3 {
+        let ta = ld(&t[a]);
+        for j in 0..3 {
+            let (mut v, mut dv) = (_mm512_set1_pd(poly[j][2]), zero);
+            for m in (0..2).rev() {
+                dv = add(mul(dv, ta), v);
+                v = add(mul(v, ta), _mm512_set1_pd(poly[j][m]));
+            }
+            w[a][j] = v;
+            d[a][j] = dv;
+        }
+    }
+    let (mut rv, mut ry, mut rz) = ([zero; 3], [zero; 3], [zero; 3]);
+    for k in 0..3 {
+        for j in 0..3 {
+            // SAFETY: rows in bounds (caller); AVX-512 (caller).
+            let c = unsafe { rows4x8_regs::<T>(data.as_ptr().wrapping_add(j * sy + k * sz), base) };
+            let (a, b, e) = (
+                mul(w[1][j], w[2][k]),
+                mul(d[1][j], w[2][k]),
+                mul(w[1][j], d[2][k]),
+            );
+            for i in 0..3 {
+                rv[i] = add(rv[i], mul(a, c[i]));
+                ry[i] = add(ry[i], mul(b, c[i]));
+                rz[i] = add(rz[i], mul(e, c[i]));
+            }
+        }
+    }
+    // `field::dot` for three terms.
+    let dot = |x: &[__m512d; 3], r: &[__m512d; 3]| -> [f64; 8] {
+        let even = add(add(zero, mul(x[0], r[0])), mul(x[2], r[2]));
+        let odd = add(zero, mul(x[1], r[1]));
+        // SAFETY: `__m512d` and `[f64; 8]` have the same size.
+        unsafe { std::mem::transmute(add(even, odd)) }
+    };
+    (
+        dot(&w[0], &rv),
+        [dot(&d[0], &rv), dot(&w[0], &ry), dot(&w[0], &rz)],
+    )
+}
+
 /// The safeguarded Newton iteration of
 /// [`crate::roots::bernstein::refine_lanes`] for 8 lanes in AVX-512
 /// registers, bitwise what its lane loop computes with fused multiply-adds:

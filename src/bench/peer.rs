@@ -3,10 +3,10 @@
 //!
 //! The scene is the 64³ u8 glass sphere (`sphere.toml`) at 512×512. snell
 //! renders it with its main configuration (octree over Bézier-hull tags, the
-//! default classification) and four filters: `linear` and `catmull-rom` are
+//! default classification) and five filters: `linear` and `catmull-rom` are
 //! exactly POV-Ray's `interpolate 1` and `interpolate 2` interpolants,
-//! `bspline3` is the scene's filter and `smooth-bspline3` (λ = 1) the most
-//! accurate. POV-Ray renders it through [`crate::peer::povray`]'s export
+//! `bspline2` is the cheapest B-spline, `bspline3` the scene's filter and
+//! `smooth-bspline3` (λ = 1) the most accurate. POV-Ray renders it through [`crate::peer::povray`]'s export
 //! (`isosurface` over the `density_file df3`, its fastest correct settings:
 //! `max_gradient` from the data, `max_trace 1`, a tight `contained_by`,
 //! `frequency 0`) with trilinear and tricubic interpolation at accuracy 1e-3
@@ -76,7 +76,13 @@ pub const POV_CAREFUL_ACCURACY: f64 = 1e-4;
 pub const GOAL_SPEEDUP: f64 = 25.0;
 
 /// snell's filters in the comparison (`smooth-bspline3` with λ = 1).
-const SNELL_FILTERS: [&str; 4] = ["linear", "catmull-rom", "bspline3", "smooth-bspline3"];
+const SNELL_FILTERS: [&str; 5] = [
+    "linear",
+    "catmull-rom",
+    "bspline2",
+    "bspline3",
+    "smooth-bspline3",
+];
 
 /// POV-Ray's rows: interpolation and accuracy.
 const POV_ROWS: [(Interpolation, f64); 4] = [
