@@ -14,6 +14,7 @@ pub mod merge;
 pub mod metrics;
 pub mod prss;
 
+use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
 use exr::prelude::{
@@ -22,7 +23,7 @@ use exr::prelude::{
 };
 
 use crate::atomic::write_atomic;
-use crate::render::tile::{Region, Tile, TileOut};
+use crate::render::tile::{Pixels, Region, Tile, TileOut};
 
 #[derive(Debug, thiserror::Error)]
 pub enum FilmError {
@@ -53,78 +54,105 @@ pub struct Film {
     pub color: Vec<[f32; 3]>,
 }
 
-/// Consecutive whole rows of a film's buffers, from image row `origin[1]`
-/// (the film's own column origin `origin[0]`), to copy tiles into.
-struct RowsMut<'a> {
+/// A tile's rectangle of a [`Film`], written in place by the tile pass
+/// ([`Film::tile_targets`]): row `r`, column `c` of the rectangle is
+/// element `r · stride + c` from its first pixel in each buffer.
+pub struct TileTarget<'f> {
+    u: *mut f32,
+    v: *mut f32,
+    events: *mut f32,
+    color: *mut [f32; 3],
+    /// The film's row length.
+    stride: usize,
     width: usize,
-    full_width: usize,
-    origin: [usize; 2],
-    u: &'a mut [f32],
-    v: &'a mut [f32],
-    events: &'a mut [f32],
-    color: &'a mut [[f32; 3]],
+    height: usize,
+    colours: bool,
+    _film: PhantomData<&'f mut Film>,
 }
 
-impl<'a> RowsMut<'a> {
-    /// The rows before image row `y` and the rows from it on (`y` at or
-    /// past these rows' first, and at most one past their last).
-    fn split_at_row(self, y: u32) -> (RowsMut<'a>, RowsMut<'a>) {
-        let rows = y as usize - self.origin[1];
-        let at = rows * self.width;
-        let (u0, u1) = self.u.split_at_mut(at);
-        let (v0, v1) = self.v.split_at_mut(at);
-        let (e0, e1) = self.events.split_at_mut(at);
-        let (c0, c1) = self.color.split_at_mut(at);
-        let part = |u, v, events, color, row| RowsMut {
-            width: self.width,
-            full_width: self.full_width,
-            origin: [self.origin[0], row],
-            u,
-            v,
-            events,
-            color,
-        };
-        (
-            part(u0, v0, e0, c0, self.origin[1]),
-            part(u1, v1, e1, c1, y as usize),
-        )
+// SAFETY: a target reads and writes only inside its rectangle (every access
+// checks the row and column against it), the rectangles of one
+// `Film::tile_targets` call are disjoint (checked there), and the film's
+// buffers outlive the targets (borrowed mutably for `'f`): targets on
+// different threads never touch the same value.
+unsafe impl Send for TileTarget<'_> {}
+
+impl TileTarget<'_> {
+    /// The element of the pixel at `row`, `col` of the rectangle.
+    ///
+    /// # Panics
+    /// When the pixel lies outside the rectangle.
+    #[inline(always)]
+    fn at(&self, row: usize, col: usize) -> usize {
+        assert!(
+            row < self.height && col < self.width,
+            "pixel outside the tile"
+        );
+        row * self.stride + col
     }
 
-    /// [`Film::blit`] into these rows, which must hold the tile's pixels.
-    fn blit(&mut self, t: &TileOut, with_hits: bool) {
-        let [ox, oy] = self.origin;
-        match &t.region {
-            Region::Rect(tile) => {
-                let tw = tile.width() as usize;
-                for row in 0..tile.height() as usize {
-                    let src = row * tw;
-                    let dst = (tile.y0 as usize - oy + row) * self.width + tile.x0 as usize - ox;
-                    if with_hits {
-                        self.u[dst..dst + tw].copy_from_slice(&t.u[src..src + tw]);
-                        self.v[dst..dst + tw].copy_from_slice(&t.v[src..src + tw]);
-                        self.events[dst..dst + tw].copy_from_slice(&t.events[src..src + tw]);
-                    }
-                    if let Some(c) = &t.color {
-                        self.color[dst..dst + tw].copy_from_slice(&c[src..src + tw]);
-                    }
-                }
-            }
-            Region::List(pixels) => {
-                for (k, &p) in pixels.iter().enumerate() {
-                    let p = p as usize;
-                    let p = (p / self.full_width - oy) * self.width + p % self.full_width - ox;
-                    if with_hits {
-                        self.u[p] = t.u[k];
-                        self.v[p] = t.v[k];
-                        self.events[p] = t.events[k];
-                    }
-                    if let Some(c) = &t.color {
-                        self.color[p] = c[k];
-                    }
+    /// Whether the tile records colours here.
+    pub fn colours(&self) -> bool {
+        self.colours
+    }
+
+    /// Sets the rectangle's pixels to a tile's starting values: no hit
+    /// (NaN), no events, and black where colours are recorded.
+    pub fn clear(&mut self) {
+        for row in 0..self.height {
+            for col in 0..self.width {
+                self.set_hit(row, col, [f32::NAN, f32::NAN, 0.0]);
+                if self.colours {
+                    let i = self.at(row, col);
+                    // SAFETY: `i` is a pixel of the rectangle (`at`), which
+                    // lies in the film's buffers and is this target's alone.
+                    unsafe { *self.color.add(i) = [0.0; 3] };
                 }
             }
         }
     }
+
+    /// Writes the hit position and event count `[u, v, events]` of the
+    /// pixel at `row`, `col`.
+    #[inline(always)]
+    pub fn set_hit(&mut self, row: usize, col: usize, [u, v, events]: [f32; 3]) {
+        let i = self.at(row, col);
+        // SAFETY: as in `clear`.
+        unsafe {
+            *self.u.add(i) = u;
+            *self.v.add(i) = v;
+            *self.events.add(i) = events;
+        }
+    }
+
+    /// Adds `weight · color` to the pixel at `row`, `col` (only where the
+    /// target records colours).
+    #[inline(always)]
+    pub fn add_color(&mut self, row: usize, col: usize, weight: f32, color: [f32; 3]) {
+        if !self.colours {
+            return;
+        }
+        let i = self.at(row, col);
+        // SAFETY: as in `clear`.
+        let c = unsafe { &mut *self.color.add(i) };
+        for k in 0..3 {
+            c[k] += weight * color[k];
+        }
+    }
+}
+
+/// Whether `tiles` come in bands of rows, as [`crate::render::tile::tiles`]
+/// orders them: runs of rectangles on the same rows, each left to right
+/// without overlap, the runs top to bottom without overlap. No two such
+/// rectangles share a pixel.
+fn in_bands(tiles: &[Tile]) -> bool {
+    let bands: Vec<&[Tile]> = tiles
+        .chunk_by(|a, b| (a.y0, a.y1) == (b.y0, b.y1))
+        .collect();
+    bands.windows(2).all(|b| b[0][0].y1 <= b[1][0].y0)
+        && bands
+            .iter()
+            .all(|run| run.windows(2).all(|t| t[0].x1 <= t[1].x0))
 }
 
 /// The hit-position image alone (what `compare` reads back).
@@ -167,83 +195,107 @@ impl Film {
         }
     }
 
-    /// Copies a tile's results into place (hit positions only where the tile
-    /// traced pixel-centre rays, colours only where it recorded them).
+    /// A film for the tile pass over `window` of an image of size `full`,
+    /// its buffers zeroed but not yet written: fresh pages, which the tiles
+    /// fault in as they write their own rectangles ([`Film::tile_targets`])
+    /// in parallel, where [`Film::window`]'s fills would first touch every
+    /// page on one thread.
+    pub fn for_tiles(window: Tile, full: [u32; 2]) -> Film {
+        let n = (window.width() as usize) * (window.height() as usize);
+        Film {
+            width: window.width(),
+            height: window.height(),
+            origin: [window.x0, window.y0],
+            full,
+            u: vec![0.0; n],
+            v: vec![0.0; n],
+            events: vec![0.0; n],
+            color: vec![[0.0; 3]; n],
+        }
+    }
+
+    /// The rectangles `tiles` of the film (image coordinates, inside its
+    /// window), each to be written in place by one tile, with colours if
+    /// `colours`. The tiles must come in bands of rows as
+    /// [`crate::render::tile::tiles`] orders them (a run of rectangles on
+    /// the same rows, left to right without overlap, the runs top to bottom
+    /// without overlap): then no two share a pixel, and tiles running in
+    /// parallel write the film without a copy.
+    ///
+    /// # Panics
+    /// When a rectangle lies outside the window or the tiles are not in
+    /// such bands.
+    pub fn tile_targets(&mut self, tiles: &[Tile], colours: bool) -> Vec<TileTarget<'_>> {
+        let [ox, oy] = self.origin;
+        let inside = |t: &Tile| {
+            t.x0 >= ox
+                && t.y0 >= oy
+                && t.x1 <= ox + self.width
+                && t.y1 <= oy + self.height
+                && t.x0 < t.x1
+                && t.y0 < t.y1
+        };
+        assert!(tiles.iter().all(inside), "a tile outside the film's window");
+        assert!(in_bands(tiles), "tiles in bands of rows, without overlap");
+        let stride = self.width as usize;
+        let (u, v) = (self.u.as_mut_ptr(), self.v.as_mut_ptr());
+        let (events, color) = (self.events.as_mut_ptr(), self.color.as_mut_ptr());
+        tiles
+            .iter()
+            .map(|t| {
+                let at = (t.y0 - oy) as usize * stride + (t.x0 - ox) as usize;
+                // In bounds: the rectangle lies inside the window (checked
+                // above), so its first pixel is one of the buffers'.
+                TileTarget {
+                    u: u.wrapping_add(at),
+                    v: v.wrapping_add(at),
+                    events: events.wrapping_add(at),
+                    color: color.wrapping_add(at),
+                    stride,
+                    width: t.width() as usize,
+                    height: t.height() as usize,
+                    colours,
+                    _film: PhantomData,
+                }
+            })
+            .collect()
+    }
+
+    /// Copies a tile's own pixels into place (hit positions only where the
+    /// tile traced pixel-centre rays, colours only where it recorded them);
+    /// a tile that wrote the film in place has nothing to copy.
     ///
     /// Tiles are in image coordinates and must lie inside the film's window.
     pub fn blit(&mut self, t: &TileOut, with_hits: bool) {
-        self.rows_mut().blit(t, with_hits);
-    }
-
-    /// [`Film::blit`] for every tile of `outs`, the rectangles' bands of
-    /// rows in parallel.
-    ///
-    /// Consecutive rectangles with the same rows (a row of tiles, as
-    /// [`crate::render::tile::tiles`] orders them) form a band, and bands
-    /// in increasing row order own disjoint rows of the buffers, so each is
-    /// copied by its own task: the copy is the first write to most of a
-    /// fresh film's pages, and on one thread it was the whole of a single
-    /// render's film stage (sphere 512×512: 2.3–2.8 ms between the tiles
-    /// and PRSS). Lists of pixels, and rectangles in any other order, are
-    /// copied one after another.
-    pub fn blit_all(&mut self, outs: &[TileOut], with_hits: bool) {
-        use rayon::prelude::*;
-        let Some(bands) = self.bands(outs) else {
-            for o in outs {
-                self.blit(o, with_hits);
-            }
+        let Pixels::Own(own) = &t.pixels else {
             return;
         };
-        // Split the buffers at the bands' rows: one view per band.
-        let mut views = Vec::with_capacity(bands.len());
-        let mut rest = self.rows_mut();
-        for &(y0, y1, tiles) in &bands {
-            let (_, from) = rest.split_at_row(y0);
-            let (band, after) = from.split_at_row(y1);
-            views.push((band, tiles));
-            rest = after;
-        }
-        views
-            .into_par_iter()
-            .with_max_len(1)
-            .for_each(|(mut band, tiles)| {
-                for o in tiles {
-                    band.blit(o, with_hits);
-                }
-            });
-    }
-
-    /// The bands of rows of `outs` for [`Film::blit_all`]: `(y0, y1, tiles)`
-    /// per run of rectangles with the same rows, when every region is a
-    /// rectangle and the bands come in increasing, disjoint row order inside
-    /// the window; `None` otherwise.
-    fn bands<'a>(&self, outs: &'a [TileOut]) -> Option<Vec<(u32, u32, &'a [TileOut])>> {
-        let rows = |o: &TileOut| match &o.region {
-            Region::Rect(t) => Some((t.y0, t.y1)),
-            Region::List(_) => None,
+        let [ox, oy] = [self.origin[0] as usize, self.origin[1] as usize];
+        let (w, full_w) = (self.width as usize, self.full[0] as usize);
+        let mut put = |src: usize, dst: usize, len: usize| {
+            if with_hits {
+                self.u[dst..dst + len].copy_from_slice(&own.u[src..src + len]);
+                self.v[dst..dst + len].copy_from_slice(&own.v[src..src + len]);
+                self.events[dst..dst + len].copy_from_slice(&own.events[src..src + len]);
+            }
+            if let Some(c) = &own.color {
+                self.color[dst..dst + len].copy_from_slice(&c[src..src + len]);
+            }
         };
-        let bands = outs
-            .chunk_by(|a, b| rows(a) == rows(b))
-            .map(|run| rows(&run[0]).map(|(y0, y1)| (y0, y1, run)))
-            .collect::<Option<Vec<_>>>()?;
-        let ordered = bands.windows(2).all(|b| b[0].1 <= b[1].0)
-            && bands.first().is_some_and(|b| b.0 >= self.origin[1])
-            && bands
-                .last()
-                .is_some_and(|b| b.1 <= self.origin[1] + self.height);
-        ordered.then_some(bands)
-    }
-
-    /// All of the film's rows, to write into.
-    fn rows_mut(&mut self) -> RowsMut<'_> {
-        RowsMut {
-            width: self.width as usize,
-            full_width: self.full[0] as usize,
-            origin: [self.origin[0] as usize, self.origin[1] as usize],
-            u: &mut self.u,
-            v: &mut self.v,
-            events: &mut self.events,
-            color: &mut self.color,
+        match &t.region {
+            Region::Rect(tile) => {
+                let tw = tile.width() as usize;
+                for row in 0..tile.height() as usize {
+                    let dst = (tile.y0 as usize - oy + row) * w + tile.x0 as usize - ox;
+                    put(row * tw, dst, tw);
+                }
+            }
+            Region::List(pixels) => {
+                for (k, &p) in pixels.iter().enumerate() {
+                    let p = p as usize;
+                    put(k, (p / full_w - oy) * w + p % full_w - ox, 1);
+                }
+            }
         }
     }
 
@@ -456,27 +508,27 @@ mod tests {
     use crate::render::tile::tiles;
 
     /// A tile output whose every value says which pixel and tile it is.
-    fn tile_out(region: Region, full_width: u32, tag: f32, colours: bool) -> TileOut {
+    fn tile_out(region: Region, full_width: u32, tag: f32, colours: bool) -> TileOut<'static> {
         let mut px = Vec::new();
         region.for_each_pixel(full_width, |x, y| px.push((y * full_width + x) as f32));
-        TileOut {
-            region,
-            u: px.clone(),
-            v: px.iter().map(|p| -p).collect(),
-            events: vec![tag; px.len()],
-            color: colours.then(|| px.iter().map(|&p| [p, tag, 1.0]).collect()),
-            counters: Default::default(),
-            times: Default::default(),
-            trace: None,
-        }
+        let mut out = TileOut::owning(region, colours);
+        let Pixels::Own(own) = &mut out.pixels else {
+            unreachable!("an owning tile")
+        };
+        own.u = px.clone();
+        own.v = px.iter().map(|p| -p).collect();
+        own.events = vec![tag; px.len()];
+        own.color = colours.then(|| px.iter().map(|&p| [p, tag, 1.0]).collect());
+        out
     }
 
-    /// The bands copied in parallel give the film one tile at a time
-    /// gives: whole images and windows (whose tiles are cut at the window,
-    /// as a `--region` render's are), with and without hits or colours,
-    /// and lists of pixels (copied in turn).
+    /// The rectangles of a pass written in place through their targets give
+    /// the film that copying each tile's own pixels gives: whole images and
+    /// windows (whose tiles are cut at the window, as a `--region` render's
+    /// are), with and without colours, every pixel written. Lists of pixels
+    /// are copied.
     #[test]
-    fn parallel_bands_copy_as_tiles_one_at_a_time() {
+    fn tiles_written_in_place_are_tiles_copied() {
         let full = [53u32, 41];
         let windows = [
             Tile {
@@ -499,57 +551,87 @@ mod tests {
             },
         ];
         for window in windows {
-            for (size, with_hits, colours) in [(16, true, false), (7, false, true), (1, true, true)]
-            {
-                let outs: Vec<TileOut> = tiles(full[0], full[1], size)
+            for (size, colours) in [(16, false), (7, true), (1, true)] {
+                let rects: Vec<Tile> = tiles(full[0], full[1], size)
                     .into_iter()
                     .filter_map(|t| t.intersect(&window))
-                    .enumerate()
-                    .map(|(k, t)| tile_out(Region::Rect(t), full[0], k as f32, colours))
                     .collect();
-                let mut one = Film::window(window, full);
-                for o in &outs {
-                    one.blit(o, with_hits);
+                let mut copied = Film::window(window, full);
+                for (k, t) in rects.iter().enumerate() {
+                    copied.blit(
+                        &tile_out(Region::Rect(*t), full[0], k as f32, colours),
+                        true,
+                    );
                 }
-                let mut bands = Film::window(window, full);
-                let split = bands.bands(&outs).expect("rows of rectangles form bands");
-                assert_eq!(
-                    split.iter().map(|b| b.2.len()).sum::<usize>(),
-                    outs.len(),
-                    "{window:?} tile {size}"
-                );
-                bands.blit_all(&outs, with_hits);
+                let mut in_place = Film::for_tiles(window, full);
+                for (k, mut target) in in_place
+                    .tile_targets(&rects, colours)
+                    .into_iter()
+                    .enumerate()
+                {
+                    target.clear();
+                    let t = rects[k];
+                    for row in 0..t.height() as usize {
+                        for col in 0..t.width() as usize {
+                            let p = ((t.y0 as usize + row) * full[0] as usize + t.x0 as usize + col)
+                                as f32;
+                            target.set_hit(row, col, [p, -p, k as f32]);
+                            target.add_color(row, col, 1.0, [p, k as f32, 1.0]);
+                        }
+                    }
+                }
                 let bits = |f: &Film| {
                     let b = |x: &[f32]| x.iter().map(|v| v.to_bits()).collect::<Vec<_>>();
                     let c: Vec<f32> = f.color.iter().flatten().copied().collect();
                     (b(&f.u), b(&f.v), b(&f.events), b(&c))
                 };
-                assert_eq!(bits(&one), bits(&bands), "{window:?} tile {size}");
-                if with_hits {
-                    assert!(one.u.iter().all(|u| !u.is_nan()), "every pixel written");
-                }
+                assert_eq!(bits(&copied), bits(&in_place), "{window:?} tile {size}");
+                assert!(copied.u.iter().all(|u| !u.is_nan()), "every pixel written");
             }
         }
-        // Lists of pixels after the rectangles: copied in turn.
-        let mut outs: Vec<TileOut> = tiles(full[0], full[1], 16)
-            .into_iter()
-            .map(|t| tile_out(Region::Rect(t), full[0], 1.0, true))
-            .collect();
-        outs.push(tile_out(
-            Region::List(vec![3, 60, 2000]),
-            full[0],
-            9.0,
+        // A list of pixels after the rectangles: copied.
+        let mut film = Film::new(full[0], full[1]);
+        film.blit(
+            &tile_out(Region::List(vec![3, 60, 2000]), full[0], 9.0, true),
             true,
-        ));
-        let mut one = Film::new(full[0], full[1]);
-        for o in &outs {
-            one.blit(o, true);
-        }
-        let mut bands = Film::new(full[0], full[1]);
-        assert!(bands.bands(&outs).is_none(), "a list is copied in turn");
-        bands.blit_all(&outs, true);
-        assert_eq!(one.events, bands.events);
-        assert_eq!(bands.events[60], 9.0);
+        );
+        assert_eq!(film.events[60], 9.0);
+        assert_eq!(film.u[2000], 2000.0);
+        assert_eq!(film.color[3], [3.0, 9.0, 1.0]);
+    }
+
+    /// Targets refuse pixels outside their rectangle, and a pass's
+    /// rectangles must not overlap.
+    #[test]
+    fn targets_stay_in_their_rectangles() {
+        let t = |x0, y0, x1, y1| Tile { x0, y0, x1, y1 };
+        assert!(in_bands(&[t(0, 0, 4, 2), t(4, 0, 9, 2), t(0, 2, 9, 5)]));
+        assert!(
+            !in_bands(&[t(0, 0, 5, 2), t(4, 0, 9, 2)]),
+            "overlap in a row"
+        );
+        assert!(
+            !in_bands(&[t(0, 0, 9, 3), t(0, 2, 9, 5)]),
+            "overlapping rows"
+        );
+        assert!(
+            !in_bands(&[t(0, 2, 9, 5), t(0, 0, 9, 2)]),
+            "rows out of order"
+        );
+        let mut film = Film::for_tiles(t(0, 0, 9, 5), [9, 5]);
+        let mut targets = film.tile_targets(&[t(0, 0, 4, 2), t(4, 0, 9, 2)], false);
+        targets[1].set_hit(1, 4, [1.0, 2.0, 3.0]);
+        let outside = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            targets[0].set_hit(0, 4, [1.0, 2.0, 3.0])
+        }));
+        assert!(outside.is_err(), "column 4 lies in the next tile");
+        drop(targets);
+        assert_eq!(film.events[9 + 8], 3.0);
+        let overlapping = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+            film.tile_targets(&[t(0, 0, 5, 2), t(4, 0, 9, 2)], false)
+                .len()
+        }));
+        assert!(overlapping.is_err());
     }
 
     #[test]

@@ -33,7 +33,7 @@ pub use context::Ctx;
 pub use stats::{Counters, PrepareTimes, RenderStats};
 pub use trace::Trace;
 
-use crate::film::{Film, prss};
+use crate::film::{Film, TileTarget, prss};
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 pub use crate::prepare::Prepared;
@@ -180,7 +180,29 @@ fn render_field<T: Coefficient>(
     // A post stage colours the film from the hit image: the first pass
     // records hits only.
     let post = post_mode(scene);
-    let outs = trace_regions(&ctx, regions, first, post.is_none(), progress, traced);
+    let mut film = Film::for_tiles(traced_rect, [scene.width, scene.height]);
+    let mut stats = RenderStats {
+        threads: rayon::current_num_threads(),
+        width: scene.width,
+        height: scene.height,
+        prepare: prep.times,
+        ..Default::default()
+    };
+    // The first pass's tiles write their rectangles of the film in place.
+    let rects: Vec<tile::Tile> = regions
+        .iter()
+        .map(|r| match r {
+            Region::Rect(t) => *t,
+            Region::List(_) => unreachable!("the first pass traces rectangles"),
+        })
+        .collect();
+    let targets = film.tile_targets(&rects, post.is_none());
+    let tiles = regions
+        .into_iter()
+        .zip(targets)
+        .map(|(region, target)| (region, Some(target)))
+        .collect();
+    let outs = trace_regions(&ctx, tiles, first, false, progress, traced);
     if let Some(t) = trace.as_deref_mut() {
         t.complete(
             "tiles",
@@ -192,16 +214,9 @@ fn render_field<T: Coefficient>(
         );
         record_tiles(t, &outs, "primary");
     }
-    let mut film = Film::window(traced_rect, [scene.width, scene.height]);
-    let mut stats = RenderStats {
-        threads: rayon::current_num_threads(),
-        width: scene.width,
-        height: scene.height,
-        prepare: prep.times,
-        ..Default::default()
-    };
     let film_start = Instant::now();
-    absorb(&mut film, &mut stats, &outs, true);
+    add_stats(&mut stats, &outs);
+    drop(outs);
     let mut film_time = film_start.elapsed();
     if let Some(t) = trace.as_deref_mut() {
         t.complete(
@@ -250,9 +265,9 @@ fn render_field<T: Coefficient>(
             .collect();
         if !flagged.is_empty() {
             stats.retraced_pixels = flagged.len() as u64;
-            let regions: Vec<Region> = flagged
+            let regions = flagged
                 .chunks((rs.tile * rs.tile) as usize)
-                .map(|c| Region::List(c.to_vec()))
+                .map(|c| (Region::List(c.to_vec()), None))
                 .collect();
             let retrace_start = Instant::now();
             let outs = trace_regions(
@@ -264,7 +279,10 @@ fn render_field<T: Coefficient>(
                 traced,
             );
             let t = Instant::now();
-            absorb(&mut film, &mut stats, &outs, false);
+            for o in &outs {
+                film.blit(o, false);
+            }
+            add_stats(&mut stats, &outs);
             film_time += t.elapsed();
             if let Some(tr) = trace {
                 tr.complete(
@@ -304,7 +322,9 @@ thread_local! {
     static TILE_ARENA: RefCell<Bump> = RefCell::new(Bump::new());
 }
 
-/// Traces regions in parallel; results come back in region order.
+/// Traces regions in parallel, each into its rectangle of the film where
+/// it has one, else into buffers of its own (with colours if `colours`);
+/// results come back in region order.
 ///
 /// Every tile is a task of its own (`with_max_len(1)`), so a thread that
 /// runs out of tiles takes them from another thread's share one at a
@@ -313,21 +333,25 @@ thread_local! {
 /// this shared machine, where one core at times ran a third slower, the
 /// other finished its 512 tiles of the sphere 14 ms before it (`snell
 /// render --trace`, two runs of six), idle for a quarter of the tile pass.
-fn trace_regions<T: Coefficient>(
+fn trace_regions<'f, T: Coefficient>(
     ctx: &Ctx<T>,
-    regions: Vec<Region>,
+    regions: Vec<(Region, Option<TileTarget<'f>>)>,
     sampling: Sampling,
     colours: bool,
     progress: Option<&AtomicUsize>,
     traced: bool,
-) -> Vec<tile::TileOut> {
+) -> Vec<tile::TileOut<'f>> {
     regions
         .into_par_iter()
         .with_max_len(1)
-        .map(|region| {
+        .map(|(region, target)| {
+            let out = match target {
+                Some(target) => tile::TileOut::in_film(region, target),
+                None => tile::TileOut::owning(region, colours),
+            };
             let out = TILE_ARENA.with_borrow_mut(|bump| {
                 bump.reset();
-                with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S, _>(ctx, region, sampling, colours, bump, traced))
+                with_support!(ctx.field.kernel().support(), S => tile::render_tile::<S, _>(ctx, out, sampling, bump, traced))
             });
             if let Some(p) = progress {
                 p.fetch_add(1, Ordering::Relaxed);
@@ -337,9 +361,8 @@ fn trace_regions<T: Coefficient>(
         .collect()
 }
 
-/// Folds tile outputs into the film and the stats, in region order.
-fn absorb(film: &mut Film, stats: &mut RenderStats, outs: &[tile::TileOut], with_hits: bool) {
-    film.blit_all(outs, with_hits);
+/// Adds the tiles' counters and stage times to the stats, in region order.
+fn add_stats(stats: &mut RenderStats, outs: &[tile::TileOut]) {
     for o in outs {
         stats.counters.add(&o.counters);
         stats.stage_times.merge(&o.times);

@@ -28,8 +28,11 @@ pub enum Fate {
 pub struct Rays<'a> {
     /// Image pixel index `y * width + x`.
     pub pixel: BVec<'a, u32>,
-    /// The pixel's position in its region's output ([`TileOut`]'s order),
-    /// known when the ray is generated, so recording needs no division.
+    /// The pixel's output slot in its region ([`TileOut`]: a rectangle's
+    /// [`rect_slot`], a list's position), known when the ray is generated,
+    /// so recording needs no division.
+    ///
+    /// [`rect_slot`]: super::tile::rect_slot
     ///
     /// [`TileOut`]: super::tile::TileOut
     pub slot: BVec<'a, u32>,

@@ -10,6 +10,7 @@ use super::packet::Rays;
 use super::stages::{entry, generate, record, refract, solve, traverse};
 use super::stats::{Counters, Stage, StageTimes};
 use super::trace::{Span, TileTrace};
+use crate::film::TileTarget;
 use crate::filter::coeffs::Coefficient;
 
 /// A rectangle of pixels `[x0, x1) × [y0, y1)`.
@@ -109,16 +110,45 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
     out
 }
 
-/// What a tile produces: its part of the film.
-#[derive(Clone, Debug)]
-pub struct TileOut {
+/// A rectangle's output slot of the pixel at `row`, `col` of the
+/// rectangle: `row << 8 | col`. Tiles are at most 256 pixels a side
+/// (`render.tile`), so recording decodes a slot with a shift and a mask,
+/// not a division by the tile's width.
+#[inline(always)]
+pub fn rect_slot(row: u32, col: u32) -> u32 {
+    row << 8 | col
+}
+
+/// Largest side of a rectangle [`rect_slot`] can address.
+pub const MAX_RECT_SIDE: u32 = 256;
+
+/// The row of a rectangle's slot ([`rect_slot`]).
+#[inline(always)]
+fn slot_row(slot: u32) -> usize {
+    (slot >> 8) as usize
+}
+
+/// The column of a rectangle's slot ([`rect_slot`]).
+#[inline(always)]
+fn slot_col(slot: u32) -> usize {
+    (slot & 0xFF) as usize
+}
+
+/// Where output `slot` of `region` lies in its own buffers (the region's
+/// pixel order): a rectangle's row by row, a list's in its order.
+#[inline(always)]
+fn own_index(region: &Region, slot: u32) -> usize {
+    match region {
+        Region::Rect(t) => slot_row(slot) * t.width() as usize + slot_col(slot),
+        Region::List(_) => slot as usize,
+    }
+}
+
+/// What a tile produces: its pixels, written into the film in place or kept
+/// for it, and what the tile did.
+pub struct TileOut<'f> {
     pub region: Region,
-    pub u: Vec<f32>,
-    pub v: Vec<f32>,
-    pub events: Vec<f32>,
-    /// `None` when the tile records no colours (a post stage colours the
-    /// film from the hits), so none are zeroed here or copied to the film.
-    pub color: Option<Vec<[f32; 3]>>,
+    pub pixels: Pixels<'f>,
     pub counters: Counters,
     pub times: StageTimes,
     /// When and on which thread the tile ran, with its stage calls (traced
@@ -126,18 +156,100 @@ pub struct TileOut {
     pub trace: Option<TileTrace>,
 }
 
-impl TileOut {
-    fn new(region: Region, colours: bool) -> TileOut {
+/// Where a tile writes its pixels.
+pub enum Pixels<'f> {
+    /// In place, in the film's rows (the first pass's rectangles: no
+    /// per-tile buffers to allocate and fault in, and no copy into the
+    /// film afterwards).
+    Film(TileTarget<'f>),
+    /// Buffers of its own in the region's pixel order, for the film to
+    /// absorb ([`crate::film::Film::blit`]): lists of pixels re-traced
+    /// after the post stage.
+    Own(OwnPixels),
+}
+
+/// A tile's own pixel buffers, in its region's order.
+#[derive(Clone, Debug)]
+pub struct OwnPixels {
+    pub u: Vec<f32>,
+    pub v: Vec<f32>,
+    pub events: Vec<f32>,
+    /// `None` when the tile records no colours (a post stage colours the
+    /// film from the hits), so none are zeroed here or copied to the film.
+    pub color: Option<Vec<[f32; 3]>>,
+}
+
+impl<'f> TileOut<'f> {
+    /// A tile writing `region` into `target`, its rectangle of the film.
+    pub fn in_film(region: Region, mut target: TileTarget<'f>) -> TileOut<'f> {
+        target.clear();
+        TileOut::with(region, Pixels::Film(target))
+    }
+
+    /// A tile keeping `region`'s pixels (and colours, with `colours`).
+    pub fn owning(region: Region, colours: bool) -> TileOut<'f> {
+        if let Region::Rect(t) = &region {
+            assert!(
+                t.width() <= MAX_RECT_SIDE && t.height() <= MAX_RECT_SIDE,
+                "rectangles are at most {MAX_RECT_SIDE} pixels a side"
+            );
+        }
         let n = region.pixels();
-        TileOut {
-            region,
+        let own = OwnPixels {
             u: vec![f32::NAN; n],
             v: vec![f32::NAN; n],
             events: vec![0.0; n],
             color: colours.then(|| vec![[0.0; 3]; n]),
+        };
+        TileOut::with(region, Pixels::Own(own))
+    }
+
+    fn with(region: Region, pixels: Pixels<'f>) -> TileOut<'f> {
+        TileOut {
+            region,
+            pixels,
             counters: Counters::default(),
             times: StageTimes::default(),
             trace: None,
+        }
+    }
+
+    /// Whether the tile records colours.
+    pub fn records_colours(&self) -> bool {
+        match &self.pixels {
+            Pixels::Film(t) => t.colours(),
+            Pixels::Own(o) => o.color.is_some(),
+        }
+    }
+
+    /// Writes the hit position and event count of the pixel at `slot`.
+    #[inline(always)]
+    pub fn set_hit(&mut self, slot: u32, u: f32, v: f32, events: f32) {
+        match &mut self.pixels {
+            Pixels::Film(t) => t.set_hit(slot_row(slot), slot_col(slot), [u, v, events]),
+            Pixels::Own(o) => {
+                let k = own_index(&self.region, slot);
+                o.u[k] = u;
+                o.v[k] = v;
+                o.events[k] = events;
+            }
+        }
+    }
+
+    /// Adds `weight · color` to the pixel at `slot` (tiles recording
+    /// colours only).
+    #[inline(always)]
+    pub fn add_color(&mut self, slot: u32, weight: f32, color: [f32; 3]) {
+        match &mut self.pixels {
+            Pixels::Film(t) => t.add_color(slot_row(slot), slot_col(slot), weight, color),
+            Pixels::Own(o) => {
+                let k = own_index(&self.region, slot);
+                if let Some(c) = &mut o.color {
+                    for i in 0..3 {
+                        c[k][i] += weight * color[i];
+                    }
+                }
+            }
         }
     }
 }
@@ -168,24 +280,22 @@ impl Recorder {
     }
 }
 
-/// Traces every ray of `region` sampled per `sampling`, recording the
-/// backdrop's colours only with `colours` (a post stage that colours the
-/// film from the hit image replaces them all). Scratch comes from
-/// `bump`, which the caller resets between tiles; `traced` records when and
-/// where the tile and each stage call ran ([`TileOut::trace`]). Never
-/// inlined: one call per tile costs nothing, and profilers get a stable
-/// anchor for a tile's work.
+/// Traces every ray of `out`'s region sampled per `sampling` into `out`,
+/// recording the backdrop's colours only where it keeps them (a post stage
+/// that colours the film from the hit image replaces them all). Scratch
+/// comes from `bump`, which the caller resets between tiles; `traced`
+/// records when and where the tile and each stage call ran
+/// ([`TileOut::trace`]). Never inlined: one call per tile costs nothing,
+/// and profilers get a stable anchor for a tile's work.
 #[inline(never)]
-pub fn render_tile<const S: usize, T: Coefficient>(
+pub fn render_tile<'f, const S: usize, T: Coefficient>(
     ctx: &Ctx<T>,
-    region: Region,
+    mut out: TileOut<'f>,
     sampling: Sampling,
-    colours: bool,
     bump: &Bump,
     traced: bool,
-) -> TileOut {
+) -> TileOut<'f> {
     let tile_start = traced.then(Instant::now);
-    let mut out = TileOut::new(region, colours);
     let mut counters = Counters::default();
     let mut times = Recorder {
         times: StageTimes::default(),
@@ -315,17 +425,21 @@ mod tests {
                         let mut list = Vec::new();
                         Region::Rect(tile).for_each_pixel(scene.width, |x, y| list.push(y * scene.width + x));
                         let run = |region| {
-                            render_tile::<4, _>(&ctx, region, Sampling::Centre, true, &bump, false)
+                            let out = TileOut::owning(region, true);
+                            render_tile::<4, _>(&ctx, out, Sampling::Centre, &bump, false)
                         };
                         let (a, b) = (run(Region::Rect(tile)), run(Region::List(list)));
+                        let (Pixels::Own(pa), Pixels::Own(pb)) = (&a.pixels, &b.pixels) else {
+                            unreachable!("owning tiles")
+                        };
                         let bits = |v: &[f32]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
                         let what = format!("{traversal} approach {approach} {tile:?}");
-                        assert_eq!(bits(&a.u), bits(&b.u), "{what}");
-                        assert_eq!(bits(&a.v), bits(&b.v), "{what}");
-                        assert_eq!(bits(&a.events), bits(&b.events), "{what}");
-                        assert_eq!(a.color, b.color, "{what}");
+                        assert_eq!(bits(&pa.u), bits(&pb.u), "{what}");
+                        assert_eq!(bits(&pa.v), bits(&pb.v), "{what}");
+                        assert_eq!(bits(&pa.events), bits(&pb.events), "{what}");
+                        assert_eq!(pa.color, pb.color, "{what}");
                         assert_eq!(a.counters, b.counters, "{what}");
-                        assert!(a.u.iter().any(|u| u.is_finite()), "{what}");
+                        assert!(pa.u.iter().any(|u| u.is_finite()), "{what}");
                     }
                 });
             }

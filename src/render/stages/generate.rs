@@ -10,7 +10,7 @@ use bumpalo::collections::Vec as BVec;
 
 use super::super::context::Ctx;
 use super::super::packet::{Queue, Rays};
-use super::super::tile::{Region, Sampling, Tile};
+use super::super::tile::{Region, Sampling, Tile, rect_slot};
 use crate::filter::coeffs::Coefficient;
 use crate::phantom::{mix64, uniform};
 use crate::scene::{Camera, Projection};
@@ -61,7 +61,11 @@ pub fn generate<'a, T: Coefficient>(
     // Pixels come in the region's order, which is its output's.
     let mut next_slot = 0;
     region.for_each_pixel(width, |px, py| {
-        let (pixel, slot) = (py * width + px, next_slot);
+        let slot = match region {
+            Region::Rect(t) => rect_slot(py - t.y0, px - t.x0),
+            Region::List(_) => next_slot,
+        };
+        let pixel = py * width + px;
         next_slot += 1;
         let (x, y) = (px as f64, py as f64);
         let mut push = |ox: f64, oy: f64, weight: f32, centre: bool| {
@@ -122,7 +126,7 @@ fn centre_runs(cam: &Camera, tile: Tile, width: u32, runs: &mut BVec<Run>) {
             let xs: [f64; RUN] = std::array::from_fn(|l| (x0 + l as u32) as f64 + 0.5);
             runs.push(Run {
                 pixel: py * width + x0,
-                slot: (py - tile.y0) * tile.width() + (x0 - tile.x0),
+                slot: rect_slot(py - tile.y0, x0 - tile.x0),
                 len: RUN.min((tile.x1 - x0) as usize),
                 dir: cam.directions(&xs, y).expect("a perspective camera"),
             });

@@ -62,7 +62,7 @@ fn record_runs<T: Coefficient>(
                 }
             };
             let ray = Recorded {
-                slot: rays.slot[i] as usize,
+                slot: rays.slot[i],
                 weight: rays.weight[i],
                 centre: rays.centre[i],
                 events: rays.events[i],
@@ -90,7 +90,7 @@ pub fn record_straight<T: Coefficient>(
     let hits = backdrop_hits(&ctx.scene.backdrop, &o, dir);
     for l in (0..RUN).filter(|&l| lanes >> l & 1 == 1) {
         let ray = Recorded {
-            slot: slot as usize + l,
+            slot: slot + l as u32,
             weight: 1.0,
             centre: true,
             events: 0,
@@ -102,8 +102,8 @@ pub fn record_straight<T: Coefficient>(
 /// What the film needs of a recorded ray besides its landing point.
 #[derive(Clone, Copy)]
 struct Recorded {
-    /// Its pixel's position in the region's output.
-    slot: usize,
+    /// Its pixel's output slot in the tile.
+    slot: u32,
     weight: f32,
     /// The pixel-centre ray, which writes the hit-position image.
     centre: bool,
@@ -115,20 +115,16 @@ struct Recorded {
 /// pixel-centre ray the hit-position image.
 #[inline(always)]
 fn write<T: Coefficient>(ctx: &Ctx<T>, hit: Option<(f64, f64)>, ray: Recorded, out: &mut TileOut) {
-    if let Some(colours) = &mut out.color {
+    if out.records_colours() {
         let color = match hit {
             Some((u, v)) => ctx.scene.backdrop.color(u, v),
             None => ctx.scene.background,
         };
-        for k in 0..3 {
-            colours[ray.slot][k] += ray.weight * color[k];
-        }
+        out.add_color(ray.slot, ray.weight, color);
     }
     if ray.centre {
         let (u, v) = hit.unwrap_or((f64::NAN, f64::NAN));
-        out.u[ray.slot] = u as f32;
-        out.v[ray.slot] = v as f32;
-        out.events[ray.slot] = ray.events as f32;
+        out.set_hit(ray.slot, u as f32, v as f32, ray.events as f32);
     }
 }
 
