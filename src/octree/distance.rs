@@ -80,7 +80,7 @@ impl Proximity {
             crate::heap::advise_huge_pages(&mut maps);
             maps.par_chunks_mut(bricked.len())
                 .enumerate()
-                .for_each(|(o, map)| to_bricked(tags.cells, &octant_map(tags, o), map));
+                .for_each(|(o, map)| octant_map(tags, o, map));
             Reach::Octants(maps)
         } else {
             let mut map = vec![0u8; bricked.len()];
@@ -178,19 +178,24 @@ fn to_bricked(cells: [usize; 3], linear: &[u8], out: &mut [u8]) {
     }
 }
 
-/// The octant map for octant `o`, x-fastest.
+/// The octant map for octant `o` into `out`, in the bricked layout.
 ///
 /// The cube of edge `k` anchored at `c` is `c` and the cubes of edge `k - 1`
 /// anchored at its seven neighbours ahead, so `D(c) = 1 + min D(c + e)` over
 /// those neighbours (0 when tagged). Sweeping from the far corner, the six
 /// neighbours in the next row or slab are already final and combine as a
 /// vector along the row; only the neighbour ahead in the row is a scan.
-fn octant_map(tags: &Tags, o: usize) -> Vec<u8> {
+///
+/// The sweep keeps two slabs of `D` (the one it fills and the one ahead)
+/// and files each finished row into the bricked map: a whole lattice of
+/// `D` per octant, written and copied, was most of the build (the
+/// teapot's eight were 92 MB of fresh pages for the kernel to clear).
+fn octant_map(tags: &Tags, o: usize, out: &mut [u8]) {
     let [nx, ny, nz] = tags.cells;
-    let mut d = vec![0u8; nx * ny * nz];
-    if d.is_empty() {
-        return d;
+    if nx * ny * nz == 0 {
+        return;
     }
+    let bricked = Bricked::new(tags.cells);
     let neg = [o & 1 != 0, o & 2 != 0, o & 4 != 0];
     // Visiting order along an axis: the cell ahead comes first.
     let order = |n: usize, neg: bool| -> Vec<usize> {
@@ -207,63 +212,74 @@ fn octant_map(tags: &Tags, o: usize) -> Vec<u8> {
             (v + 1 < n).then_some(v + 1)
         }
     };
-    let row = |y: usize, z: usize| nx * (y + ny * z);
+    // The slab being filled and the one ahead of it, rows of `nx`.
+    let (mut slab, mut ahead_slab) = (vec![0u8; nx * ny], vec![0u8; nx * ny]);
     // G(x): the three final neighbours at the same x; F(x) = min(G(x),
-    // G(x ahead)), the six of them; `tagged` the row's tags.
+    // G(x ahead)), the six of them; the row's tags as bytes.
     let mut g = vec![255u8; nx];
     let mut f = vec![255u8; nx];
-    let mut tagged = vec![false; nx];
+    let mut tagged = vec![0u8; nx];
     for &z in &order(nz, neg[2]) {
         let za = ahead(z, nz, neg[2]);
         for &y in &order(ny, neg[1]) {
             let ya = ahead(y, ny, neg[1]);
             g.fill(255);
-            let mut take = |r: usize| {
-                for (gx, &v) in g.iter_mut().zip(&d[r..r + nx]) {
+            let mut take = |r: &[u8]| {
+                for (gx, &v) in g.iter_mut().zip(r) {
                     *gx = (*gx).min(v);
                 }
             };
             if let Some(ya) = ya {
-                take(row(ya, z));
+                take(&slab[nx * ya..][..nx]);
             }
-            if let Some(za) = za {
-                take(row(y, za));
+            if za.is_some() {
+                take(&ahead_slab[nx * y..][..nx]);
                 if let Some(ya) = ya {
-                    take(row(ya, za));
+                    take(&ahead_slab[nx * ya..][..nx]);
                 }
             }
-            let base = row(y, z);
+            let base = nx * (y + ny * z);
             for (x, t) in tagged.iter_mut().enumerate() {
-                *t = tags.get_index(base + x);
+                *t = tags.get_index(base + x) as u8;
             }
-            let out = &mut d[base..base + nx];
-            // The row scan, from the cell ahead: D(x) = 1 + min(F(x), D(x ahead)).
+            let row = &mut slab[nx * y..][..nx];
+            // The row scan, from the cell ahead: D(x) = 1 + min(F(x), D(x
+            // ahead)), 0 where tagged.
             if neg[0] {
                 f[0] = g[0];
                 for x in 1..nx {
                     f[x] = g[x].min(g[x - 1]);
                 }
-                let mut last = 255u8;
-                for x in 0..nx {
-                    let v = f[x].min(last).saturating_add(1);
-                    last = if tagged[x] { 0 } else { v };
-                    out[x] = last;
-                }
+                scan(f.iter().zip(&tagged).zip(row.iter_mut()));
             } else {
                 f[nx - 1] = g[nx - 1];
                 for x in 0..nx - 1 {
                     f[x] = g[x].min(g[x + 1]);
                 }
-                let mut last = 255u8;
-                for x in (0..nx).rev() {
-                    let v = f[x].min(last).saturating_add(1);
-                    last = if tagged[x] { 0 } else { v };
-                    out[x] = last;
-                }
+                scan(f.iter().zip(&tagged).zip(row.iter_mut()).rev());
+            }
+            // A brick's rows of 4 cells are contiguous in both layouts.
+            for (x0, run) in row.chunks(4).enumerate() {
+                let at = bricked.index([4 * x0 as i64, y as i64, z as i64]);
+                out[at..at + run.len()].copy_from_slice(run);
             }
         }
+        std::mem::swap(&mut slab, &mut ahead_slab);
     }
-    d
+}
+
+/// [`octant_map`]'s row scan over `(F(x), tagged(x))` pairs in the scan's
+/// order, writing `D(x)`: branch-free, a chain of a minimum, an add and a
+/// select per cell.
+#[inline(always)]
+fn scan<'a>(cells: impl Iterator<Item = ((&'a u8, &'a u8), &'a mut u8)>) {
+    let mut last = 255u8;
+    for ((&f, &t), out) in cells {
+        let v = f.min(last).saturating_add(1);
+        // `t` is 0 or 1: all ones keeps `v`, all zeros clears it.
+        last = v & t.wrapping_sub(1);
+        *out = last;
+    }
 }
 
 /// The chessboard distance to the nearest tagged cell, x-fastest: two raster
