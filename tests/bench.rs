@@ -353,7 +353,7 @@ fn peer_comparison() {
     assert_eq!(number(&j, "run.threads"), 2.0);
     let rows = j["rows"].as_array().unwrap();
     let count = |r: &str| rows.iter().filter(|x| x["renderer"] == r).count();
-    assert_eq!((count("snell"), count("povray")), (4, 4));
+    assert_eq!((count("snell"), count("povray")), (5, 4));
     for r in rows {
         let label = r["label"].as_str().unwrap();
         for k in ["render_ms.median", "frame_ms.median", "process_ms.median"] {
@@ -377,7 +377,7 @@ fn peer_comparison() {
         }
     }
     let ratios = j["ratios"].as_array().unwrap();
-    assert_eq!(ratios.len(), 4);
+    assert_eq!(ratios.len(), 5);
     assert!(ratios.iter().all(|x| number(x, "frame") > 0.0));
     // POV-Ray and snell's identical interpolant give the same surface.
     for x in j["same_interpolant"].as_array().unwrap() {

@@ -14,7 +14,9 @@
 //!
 //! Every row gets one warm-up and `repeats` timed runs, the median reported,
 //! with the same thread count for both renderers (snell's rayon pool,
-//! POV-Ray's `Work_Threads`):
+//! POV-Ray's `Work_Threads`). The timed runs go round-robin, one of every
+//! row per round, so that a shared machine's slow spells fall on all rows
+//! alike:
 //! - **render**: snell's tile loop and film (`Frame.stats.wall`); POV-Ray's
 //!   own `Trace Time`.
 //! - **prepare**: snell's load, prefilter, classification and octree, built
@@ -294,9 +296,13 @@ pub fn peer_bench(
     let checker = base.checker_size();
     observer.begin(SNELL_FILTERS.len() + POV_ROWS.len());
 
-    let mut rows = Vec::new();
-    let mut snell_hits: Vec<(String, HitImage)> = Vec::new();
-    let mut warnings = Vec::new();
+    // Every row is set up (and warmed up) first; then the timed runs go
+    // round-robin, one run of each row per round, so that every row's
+    // median draws on the same stretch of time. Row by row, a shared
+    // machine's slow spells fell on some rows and not others: the ratio of
+    // one bspline3 row to POV-Ray's swung from 18.5x to 24.1x between two
+    // runs minutes apart.
+    let mut snells = Vec::new();
     for f in SNELL_FILTERS {
         let mut overrides = size.to_vec();
         overrides.push("render.traversal=octree".into());
@@ -312,25 +318,52 @@ pub fn peer_bench(
                 f
             }
         );
-        observer.start(&format!("snell {label}"));
-        let (row, hits) =
-            pool.install(|| snell_row(opts, &scene_path, &label, &overrides, &reference, checker))?;
-        observer.finish(&row_line(&row));
-        rows.push(row);
-        snell_hits.push((f.to_string(), hits));
+        observer.start(&format!("snell {label}: warm-up"));
+        let m = pool.install(|| SnellMeasure::new(opts, &scene_path, label, overrides))?;
+        snells.push((f, m));
     }
     let vol = base.load_volume(&LoadOptions::default())?;
-    let mut same_interpolant = Vec::new();
+    let mut povs = Vec::new();
     for (interp, accuracy) in POV_ROWS {
         let label = format!("{} accuracy {accuracy:e}", interp_name(interp));
-        observer.start(&format!("POV-Ray {label}"));
+        observer.start(&format!("POV-Ray {label}: export and hit render"));
         let dir = opts
             .out_dir
             .join("peer")
             .join(format!("povray-{}-{accuracy:e}", interp_name(interp)));
-        let (row, hits, warn) = pov_row(
-            opts, &base, &vol, &dir, &label, interp, accuracy, &reference, checker,
-        )?;
+        povs.push(PovMeasure::new(
+            opts, &base, &vol, &dir, label, interp, accuracy,
+        )?);
+    }
+    for round in 1..=opts.repeats {
+        for (_, m) in &mut snells {
+            observer.start(&format!(
+                "round {round}/{}: snell {}",
+                opts.repeats, m.label
+            ));
+            pool.install(|| m.time_once(opts))?;
+        }
+        for m in &mut povs {
+            observer.start(&format!(
+                "round {round}/{}: POV-Ray {}",
+                opts.repeats, m.label
+            ));
+            m.time_once(opts)?;
+        }
+    }
+    let mut rows = Vec::new();
+    let mut snell_hits: Vec<(String, HitImage)> = Vec::new();
+    let mut warnings = Vec::new();
+    for (f, m) in snells {
+        let (row, hits) = m.finish(opts, &reference, checker)?;
+        observer.finish(&row_line(&row));
+        rows.push(row);
+        snell_hits.push((f.to_string(), hits));
+    }
+    let mut same_interpolant = Vec::new();
+    for (m, (interp, _)) in povs.into_iter().zip(POV_ROWS) {
+        let label = m.label.clone();
+        let (row, hits, warn) = m.finish(opts, &reference, checker)?;
         observer.finish(&row_line(&row));
         warnings.extend(warn.into_iter().map(|w| format!("POV-Ray {label}: {w}")));
         let same = interp.filter().to_string();
@@ -457,186 +490,266 @@ fn median(v: &[f64]) -> f64 {
     TimeStats::of(v).map_or(f64::NAN, |(s, _)| s.median)
 }
 
-/// A snell row: cold prepare + render per run in this process, then the
-/// whole `snell render` process.
-fn snell_row(
-    opts: &PeerOptions,
-    scene_path: &Path,
-    label: &str,
-    overrides: &[String],
-    reference: &HitImage,
-    checker: Option<f64>,
-) -> Result<(PeerRow, HitImage), BenchError> {
-    let scene = Scene::load(scene_path, overrides)?;
-    let run = || -> Result<(f64, f64, render::Frame), BenchError> {
-        let t = Instant::now();
-        let prep = Prepared::for_scene(&scene, &LoadOptions::default())?;
-        let prepare_ms = t.elapsed().as_secs_f64() * 1e3;
-        let frame = render::render(&scene, &prep, None);
-        let render_ms = frame.stats.wall.as_secs_f64() * 1e3;
-        Ok((prepare_ms, render_ms, frame))
-    };
-    drop(run()?); // warm-up
-    let (mut prepare, mut rendered, mut frames) = (Vec::new(), Vec::new(), Vec::new());
-    let mut last = None;
-    for _ in 0..opts.repeats {
-        let (p, r, f) = run()?;
-        prepare.push(p);
-        rendered.push(r);
-        frames.push(p + r);
-        last = Some(f);
-    }
-    let frame = last.expect("at least one run");
-    let hits = frame.film.hits();
-    let error = error_vs_reference(label, &hits, reference, checker)?;
-
-    let png = opts.out_dir.join("peer").join(format!(
-        "snell-{}.png",
-        scene
-            .surface
-            .filter
-            .to_string()
-            .replace([' ', '=', '(', ')'], "")
-    ));
-    let mut args: Vec<String> = vec![
-        "render".into(),
-        scene_path.display().to_string(),
-        "-o".into(),
-        png.display().to_string(),
-        "--threads".into(),
-        opts.threads.to_string(),
-        "--quiet".into(),
-    ];
-    for o in overrides {
-        args.push("--set".into());
-        args.push(o.clone());
-    }
-    let process_ms = match &opts.snell_exe {
-        Some(exe) => {
-            if let Some(d) = png.parent() {
-                std::fs::create_dir_all(d).map_err(super::io_err(d))?;
-            }
-            let mut t = Vec::new();
-            for _ in 0..opts.repeats {
-                let start = Instant::now();
-                let out = Command::new(exe)
-                    .args(&args)
-                    .stdin(Stdio::null())
-                    .output()
-                    .map_err(super::io_err(exe))?;
-                t.push(start.elapsed().as_secs_f64() * 1e3);
-                if !out.status.success() {
-                    return Err(measure_err(label)(format!(
-                        "snell render failed: {}",
-                        String::from_utf8_lossy(&out.stderr).trim()
-                    )));
-                }
-            }
-            Some(stats_of(label, &t)?)
-        }
-        None => None,
-    };
-    let row = PeerRow {
-        renderer: "snell".into(),
-        label: label.to_string(),
-        settings: overrides.to_vec(),
-        runs: opts.repeats,
-        render_ms: stats_of(label, &rendered)?,
-        prepare_ms: median(&prepare),
-        frame_ms: stats_of(label, &frames)?,
-        process_ms,
-        render_cpu_ms: None,
-        error,
-        max_gradient: None,
-        gradient_estimate: None,
-        contained_by: None,
-        max_gradient_found: None,
-        command: format!("snell {}", args.join(" ")),
-    };
-    Ok((row, hits))
+/// The timings of a row's runs so far.
+#[derive(Default)]
+struct Timings {
+    prepare: Vec<f64>,
+    rendered: Vec<f64>,
+    frames: Vec<f64>,
+    process: Vec<f64>,
+    cpu: Vec<f64>,
 }
 
-/// A POV-Ray row: export, the hit render (warm-up and error), then the
-/// timed colour renders.
-#[allow(clippy::too_many_arguments)]
-fn pov_row(
-    opts: &PeerOptions,
-    scene: &Scene,
-    vol: &crate::volume::Volume,
-    dir: &Path,
-    label: &str,
+impl Timings {
+    /// One in-process run: its preparation and render times (ms).
+    fn push(&mut self, prepare: f64, render: f64) {
+        self.prepare.push(prepare);
+        self.rendered.push(render);
+        self.frames.push(prepare + render);
+    }
+}
+
+/// A snell row being measured: cold prepare + render per run in this
+/// process, then the whole `snell render` process.
+struct SnellMeasure {
+    label: String,
+    overrides: Vec<String>,
+    scene: Scene,
+    /// `snell render`'s arguments for the process runs.
+    args: Vec<String>,
+    times: Timings,
+    /// The last run's frame (its hits give the row's error).
+    last: Option<render::Frame>,
+}
+
+impl SnellMeasure {
+    /// Loads the row's scene and renders it once, untimed (the warm-up).
+    fn new(
+        opts: &PeerOptions,
+        scene_path: &Path,
+        label: String,
+        overrides: Vec<String>,
+    ) -> Result<SnellMeasure, BenchError> {
+        let scene = Scene::load(scene_path, &overrides)?;
+        let png = opts.out_dir.join("peer").join(format!(
+            "snell-{}.png",
+            scene
+                .surface
+                .filter
+                .to_string()
+                .replace([' ', '=', '(', ')'], "")
+        ));
+        if let Some(d) = png.parent() {
+            std::fs::create_dir_all(d).map_err(super::io_err(d))?;
+        }
+        let mut args: Vec<String> = vec![
+            "render".into(),
+            scene_path.display().to_string(),
+            "-o".into(),
+            png.display().to_string(),
+            "--threads".into(),
+            opts.threads.to_string(),
+            "--quiet".into(),
+        ];
+        for o in &overrides {
+            args.push("--set".into());
+            args.push(o.clone());
+        }
+        let m = SnellMeasure {
+            label,
+            overrides,
+            scene,
+            args,
+            times: Timings::default(),
+            last: None,
+        };
+        drop(m.run()?);
+        Ok(m)
+    }
+
+    /// Prepares and renders the scene: the preparation's and the render's
+    /// times (ms) and the frame.
+    fn run(&self) -> Result<(f64, f64, render::Frame), BenchError> {
+        let t = Instant::now();
+        let prep = Prepared::for_scene(&self.scene, &LoadOptions::default())?;
+        let prepare_ms = t.elapsed().as_secs_f64() * 1e3;
+        let frame = render::render(&self.scene, &prep, None);
+        Ok((prepare_ms, frame.stats.wall.as_secs_f64() * 1e3, frame))
+    }
+
+    /// One timed run in this process, and one `snell render` process when
+    /// the executable is known.
+    fn time_once(&mut self, opts: &PeerOptions) -> Result<(), BenchError> {
+        let (p, r, f) = self.run()?;
+        self.times.push(p, r);
+        self.last = Some(f);
+        if let Some(exe) = &opts.snell_exe {
+            let start = Instant::now();
+            let out = Command::new(exe)
+                .args(&self.args)
+                .stdin(Stdio::null())
+                .output()
+                .map_err(super::io_err(exe))?;
+            self.times.process.push(start.elapsed().as_secs_f64() * 1e3);
+            if !out.status.success() {
+                return Err(measure_err(&self.label)(format!(
+                    "snell render failed: {}",
+                    String::from_utf8_lossy(&out.stderr).trim()
+                )));
+            }
+        }
+        Ok(())
+    }
+
+    /// The row, and its last run's hits.
+    fn finish(
+        self,
+        opts: &PeerOptions,
+        reference: &HitImage,
+        checker: Option<f64>,
+    ) -> Result<(PeerRow, HitImage), BenchError> {
+        let label = &self.label;
+        let frame = self
+            .last
+            .ok_or_else(|| measure_err(label)("no timed run".into()))?;
+        let hits = frame.film.hits();
+        let error = error_vs_reference(label, &hits, reference, checker)?;
+        let t = &self.times;
+        let row = PeerRow {
+            renderer: "snell".into(),
+            label: label.clone(),
+            settings: self.overrides.clone(),
+            runs: opts.repeats,
+            render_ms: stats_of(label, &t.rendered)?,
+            prepare_ms: median(&t.prepare),
+            frame_ms: stats_of(label, &t.frames)?,
+            process_ms: if t.process.is_empty() {
+                None
+            } else {
+                Some(stats_of(label, &t.process)?)
+            },
+            render_cpu_ms: None,
+            error,
+            max_gradient: None,
+            gradient_estimate: None,
+            contained_by: None,
+            max_gradient_found: None,
+            command: format!("snell {}", self.args.join(" ")),
+        };
+        Ok((row, hits))
+    }
+}
+
+/// A POV-Ray row being measured: its export and hit render (the warm-up,
+/// and the error), then timed colour renders.
+struct PovMeasure {
+    label: String,
     interpolation: Interpolation,
     accuracy: f64,
-    reference: &HitImage,
-    checker: Option<f64>,
-) -> Result<(PeerRow, HitImage, Vec<String>), BenchError> {
-    let pov_opts = PovOptions {
-        interpolation,
-        accuracy,
-        max_gradient: None,
-        gradient_safety: None,
-    };
-    let ex = povray::export(dir, scene, vol, &pov_opts)?;
-    let hits_run = povray::render(&ex, Variant::Hits, opts.threads)?;
-    let hits = povray::decode_hits(&hits_run.png, &ex.encoding)?;
-    if (hits.width, hits.height) != (scene.width, scene.height) {
-        return Err(measure_err(label)(format!(
-            "POV-Ray wrote {}x{}, the scene is {}x{}",
-            hits.width, hits.height, scene.width, scene.height
-        )));
+    ex: povray::PovExport,
+    hits: HitImage,
+    warnings: Vec<String>,
+    max_gradient_found: Option<f64>,
+    times: Timings,
+}
+
+impl PovMeasure {
+    #[allow(clippy::too_many_arguments)]
+    fn new(
+        opts: &PeerOptions,
+        scene: &Scene,
+        vol: &crate::volume::Volume,
+        dir: &Path,
+        label: String,
+        interpolation: Interpolation,
+        accuracy: f64,
+    ) -> Result<PovMeasure, BenchError> {
+        let pov_opts = PovOptions {
+            interpolation,
+            accuracy,
+            max_gradient: None,
+            gradient_safety: None,
+        };
+        let ex = povray::export(dir, scene, vol, &pov_opts)?;
+        let hits_run = povray::render(&ex, Variant::Hits, opts.threads)?;
+        let hits = povray::decode_hits(&hits_run.png, &ex.encoding)?;
+        if (hits.width, hits.height) != (scene.width, scene.height) {
+            return Err(measure_err(&label)(format!(
+                "POV-Ray wrote {}x{}, the scene is {}x{}",
+                hits.width, hits.height, scene.width, scene.height
+            )));
+        }
+        Ok(PovMeasure {
+            label,
+            interpolation,
+            accuracy,
+            ex,
+            hits,
+            warnings: hits_run.stats.warnings.clone(),
+            max_gradient_found: hits_run.stats.max_gradient_found,
+            times: Timings::default(),
+        })
     }
-    let error = error_vs_reference(label, &hits, reference, checker)?;
-    let mut warnings = hits_run.stats.warnings.clone();
-    let mut found = hits_run.stats.max_gradient_found;
-    let (mut prepare, mut rendered, mut frames, mut process, mut cpu) =
-        (Vec::new(), Vec::new(), Vec::new(), Vec::new(), Vec::new());
-    for _ in 0..opts.repeats {
-        let r = povray::render(&ex, Variant::Color, opts.threads)?;
+
+    /// One timed colour render.
+    fn time_once(&mut self, opts: &PeerOptions) -> Result<(), BenchError> {
+        let r = povray::render(&self.ex, Variant::Color, opts.threads)?;
         let s = &r.stats;
         let trace = s.trace_seconds.ok_or_else(|| {
-            measure_err(label)("POV-Ray reported no trace time (statistics missing)".into())
+            measure_err(&self.label)("POV-Ray reported no trace time (statistics missing)".into())
         })?;
         let p = s.parse_seconds.unwrap_or(0.0) + s.bounding_seconds.unwrap_or(0.0);
-        prepare.push(p * 1e3);
-        rendered.push(trace * 1e3);
-        frames.push((p + trace) * 1e3);
-        process.push(r.wall_seconds * 1e3);
+        self.times.push(p * 1e3, trace * 1e3);
+        self.times.process.push(r.wall_seconds * 1e3);
         if let Some(c) = s.trace_cpu_seconds {
-            cpu.push(c * 1e3);
+            self.times.cpu.push(c * 1e3);
         }
         for w in &s.warnings {
-            if !warnings.contains(w) {
-                warnings.push(w.clone());
+            if !self.warnings.contains(w) {
+                self.warnings.push(w.clone());
             }
         }
         if let Some(g) = s.max_gradient_found {
-            found = Some(found.map_or(g, |o: f64| o.max(g)));
+            self.max_gradient_found = Some(self.max_gradient_found.map_or(g, |o: f64| o.max(g)));
         }
+        Ok(())
     }
-    let row = PeerRow {
-        renderer: "povray".into(),
-        label: label.to_string(),
-        settings: vec![
-            format!("interpolate {}", interpolation.keyword()),
-            format!("accuracy {accuracy:e}"),
-            format!("max_gradient {:.4}", ex.max_gradient),
-            "max_trace 1".into(),
-            format!("max_trace_level {}", ex.max_trace_level),
-        ],
-        runs: opts.repeats,
-        render_ms: stats_of(label, &rendered)?,
-        prepare_ms: median(&prepare),
-        frame_ms: stats_of(label, &frames)?,
-        process_ms: Some(stats_of(label, &process)?),
-        render_cpu_ms: (!cpu.is_empty()).then(|| median(&cpu)),
-        error,
-        max_gradient: Some(ex.max_gradient),
-        gradient_estimate: Some(ex.gradient_estimate),
-        contained_by: Some(ex.contained_by),
-        max_gradient_found: found,
-        command: ex.command_line(Variant::Color, opts.threads),
-    };
-    Ok((row, hits, warnings))
+
+    /// The row, its hits and its warnings.
+    fn finish(
+        self,
+        opts: &PeerOptions,
+        reference: &HitImage,
+        checker: Option<f64>,
+    ) -> Result<(PeerRow, HitImage, Vec<String>), BenchError> {
+        let label = &self.label;
+        let error = error_vs_reference(label, &self.hits, reference, checker)?;
+        let (ex, t) = (&self.ex, &self.times);
+        let row = PeerRow {
+            renderer: "povray".into(),
+            label: label.clone(),
+            settings: vec![
+                format!("interpolate {}", self.interpolation.keyword()),
+                format!("accuracy {:e}", self.accuracy),
+                format!("max_gradient {:.4}", ex.max_gradient),
+                "max_trace 1".into(),
+                format!("max_trace_level {}", ex.max_trace_level),
+            ],
+            runs: opts.repeats,
+            render_ms: stats_of(label, &t.rendered)?,
+            prepare_ms: median(&t.prepare),
+            frame_ms: stats_of(label, &t.frames)?,
+            process_ms: Some(stats_of(label, &t.process)?),
+            render_cpu_ms: (!t.cpu.is_empty()).then(|| median(&t.cpu)),
+            error,
+            max_gradient: Some(ex.max_gradient),
+            gradient_estimate: Some(ex.gradient_estimate),
+            contained_by: Some(ex.contained_by),
+            max_gradient_found: self.max_gradient_found,
+            command: ex.command_line(Variant::Color, opts.threads),
+        };
+        Ok((row, self.hits, self.warnings))
+    }
 }
 
 fn speed_ratios(rows: &[PeerRow]) -> Vec<SpeedRatio> {
@@ -721,7 +834,8 @@ pub fn section(r: &PeerReport) -> String {
         s,
         "Generated by `{}` on {} — {}, {} cores (nproc), {} threads for each renderer \
 (snell's pool, POV-Ray's `Work_Threads`), {} build of snell {}{}, {} — {} at {}×{} — one \
-warm-up and {} timed run{} per row, median reported — whole run {}{}.\n\n",
+warm-up and {} timed run{} per row, taken round-robin (one of every row per round), median \
+reported — whole run {}{}.\n\n",
         r.run.command,
         r.run.date,
         m.cpu_model.as_deref().unwrap_or("unknown CPU"),
