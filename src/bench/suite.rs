@@ -499,7 +499,13 @@ classification, in under three minutes."
             traversal_table(&SIDE_512),
             filters_table(
                 &SIDE_512,
-                &["linear", "catmull-rom", "bspline3", "smooth-bspline3"],
+                &[
+                    "linear",
+                    "catmull-rom",
+                    "bspline2",
+                    "bspline3",
+                    "smooth-bspline3",
+                ],
             ),
             antialias_table(
                 "antialiasing",
