@@ -88,6 +88,10 @@ pub trait Observer: Send {
     fn start(&mut self, _what: &str) {}
     /// An item finished; `line` summarises it.
     fn finish(&mut self, _line: &str) {}
+    /// One of the `total` steps is done, with nothing to say.
+    fn tick(&mut self) {}
+    /// A line to show without counting a step.
+    fn note(&mut self, _line: &str) {}
 }
 
 /// An observer that ignores everything.

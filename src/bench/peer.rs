@@ -6,7 +6,8 @@
 //! default classification) and five filters: `linear` and `catmull-rom` are
 //! exactly POV-Ray's `interpolate 1` and `interpolate 2` interpolants,
 //! `bspline2` is the cheapest B-spline, `bspline3` the scene's filter and
-//! `smooth-bspline3` (λ = 1) the most accurate. POV-Ray renders it through [`crate::peer::povray`]'s export
+//! `smooth-bspline3` (λ = 1) the most accurate. POV-Ray renders it through
+//! [`crate::peer::povray`]'s export
 //! (`isosurface` over the `density_file df3`, its fastest correct settings:
 //! `max_gradient` from the data, `max_trace 1`, a tight `contained_by`,
 //! `frequency 0`) with trilinear and tricubic interpolation at accuracy 1e-3
@@ -294,7 +295,8 @@ pub fn peer_bench(
         })?
         .render(&base);
     let checker = base.checker_size();
-    observer.begin(SNELL_FILTERS.len() + POV_ROWS.len());
+    // Progress counts the timed runs.
+    observer.begin((SNELL_FILTERS.len() + POV_ROWS.len()) * opts.repeats);
 
     // Every row is set up (and warmed up) first; then the timed runs go
     // round-robin, one run of each row per round, so that every row's
@@ -319,7 +321,9 @@ pub fn peer_bench(
             }
         );
         observer.start(&format!("snell {label}: warm-up"));
-        let m = pool.install(|| SnellMeasure::new(opts, &scene_path, label, overrides))?;
+        let m = pool.install(|| {
+            SnellMeasure::new(opts, &scene_path, label, overrides, &reference, checker)
+        })?;
         snells.push((f, m));
     }
     let vol = base.load_volume(&LoadOptions::default())?;
@@ -332,7 +336,7 @@ pub fn peer_bench(
             .join("peer")
             .join(format!("povray-{}-{accuracy:e}", interp_name(interp)));
         povs.push(PovMeasure::new(
-            opts, &base, &vol, &dir, label, interp, accuracy,
+            opts, &base, &vol, &dir, label, interp, accuracy, &reference, checker,
         )?);
     }
     for round in 1..=opts.repeats {
@@ -342,6 +346,7 @@ pub fn peer_bench(
                 opts.repeats, m.label
             ));
             pool.install(|| m.time_once(opts))?;
+            observer.tick();
         }
         for m in &mut povs {
             observer.start(&format!(
@@ -349,22 +354,23 @@ pub fn peer_bench(
                 opts.repeats, m.label
             ));
             m.time_once(opts)?;
+            observer.tick();
         }
     }
     let mut rows = Vec::new();
     let mut snell_hits: Vec<(String, HitImage)> = Vec::new();
     let mut warnings = Vec::new();
     for (f, m) in snells {
-        let (row, hits) = m.finish(opts, &reference, checker)?;
-        observer.finish(&row_line(&row));
+        let (row, hits) = m.finish(opts)?;
+        observer.note(&row_line(&row));
         rows.push(row);
         snell_hits.push((f.to_string(), hits));
     }
     let mut same_interpolant = Vec::new();
     for (m, (interp, _)) in povs.into_iter().zip(POV_ROWS) {
         let label = m.label.clone();
-        let (row, hits, warn) = m.finish(opts, &reference, checker)?;
-        observer.finish(&row_line(&row));
+        let (row, hits, warn) = m.finish(opts)?;
+        observer.note(&row_line(&row));
         warnings.extend(warn.into_iter().map(|w| format!("POV-Ray {label}: {w}")));
         let same = interp.filter().to_string();
         if let Some((_, sh)) = snell_hits.iter().find(|(f, _)| *f == same) {
@@ -518,17 +524,21 @@ struct SnellMeasure {
     /// `snell render`'s arguments for the process runs.
     args: Vec<String>,
     times: Timings,
-    /// The last run's frame (its hits give the row's error).
-    last: Option<render::Frame>,
+    /// The warm-up's hits (every run's, bit for bit) and their error.
+    hits: HitImage,
+    error: PeerHitError,
 }
 
 impl SnellMeasure {
-    /// Loads the row's scene and renders it once, untimed (the warm-up).
+    /// Loads the row's scene and renders it once, untimed (the warm-up),
+    /// measuring its hits against `reference`.
     fn new(
         opts: &PeerOptions,
         scene_path: &Path,
         label: String,
         overrides: Vec<String>,
+        reference: &HitImage,
+        checker: Option<f64>,
     ) -> Result<SnellMeasure, BenchError> {
         let scene = Scene::load(scene_path, &overrides)?;
         let png = opts.out_dir.join("peer").join(format!(
@@ -555,34 +565,35 @@ impl SnellMeasure {
             args.push("--set".into());
             args.push(o.clone());
         }
-        let m = SnellMeasure {
+        let (_, _, warm_up) = SnellMeasure::run_scene(&scene)?;
+        let hits = warm_up.film.hits();
+        let error = error_vs_reference(&label, &hits, reference, checker)?;
+        Ok(SnellMeasure {
             label,
             overrides,
             scene,
             args,
             times: Timings::default(),
-            last: None,
-        };
-        drop(m.run()?);
-        Ok(m)
+            hits,
+            error,
+        })
     }
 
     /// Prepares and renders the scene: the preparation's and the render's
     /// times (ms) and the frame.
-    fn run(&self) -> Result<(f64, f64, render::Frame), BenchError> {
+    fn run_scene(scene: &Scene) -> Result<(f64, f64, render::Frame), BenchError> {
         let t = Instant::now();
-        let prep = Prepared::for_scene(&self.scene, &LoadOptions::default())?;
+        let prep = Prepared::for_scene(scene, &LoadOptions::default())?;
         let prepare_ms = t.elapsed().as_secs_f64() * 1e3;
-        let frame = render::render(&self.scene, &prep, None);
+        let frame = render::render(scene, &prep, None);
         Ok((prepare_ms, frame.stats.wall.as_secs_f64() * 1e3, frame))
     }
 
     /// One timed run in this process, and one `snell render` process when
     /// the executable is known.
     fn time_once(&mut self, opts: &PeerOptions) -> Result<(), BenchError> {
-        let (p, r, f) = self.run()?;
+        let (p, r, _) = SnellMeasure::run_scene(&self.scene)?;
         self.times.push(p, r);
-        self.last = Some(f);
         if let Some(exe) = &opts.snell_exe {
             let start = Instant::now();
             let out = Command::new(exe)
@@ -601,19 +612,9 @@ impl SnellMeasure {
         Ok(())
     }
 
-    /// The row, and its last run's hits.
-    fn finish(
-        self,
-        opts: &PeerOptions,
-        reference: &HitImage,
-        checker: Option<f64>,
-    ) -> Result<(PeerRow, HitImage), BenchError> {
+    /// The row, and its hits.
+    fn finish(self, opts: &PeerOptions) -> Result<(PeerRow, HitImage), BenchError> {
         let label = &self.label;
-        let frame = self
-            .last
-            .ok_or_else(|| measure_err(label)("no timed run".into()))?;
-        let hits = frame.film.hits();
-        let error = error_vs_reference(label, &hits, reference, checker)?;
         let t = &self.times;
         let row = PeerRow {
             renderer: "snell".into(),
@@ -629,14 +630,14 @@ impl SnellMeasure {
                 Some(stats_of(label, &t.process)?)
             },
             render_cpu_ms: None,
-            error,
+            error: self.error.clone(),
             max_gradient: None,
             gradient_estimate: None,
             contained_by: None,
             max_gradient_found: None,
             command: format!("snell {}", self.args.join(" ")),
         };
-        Ok((row, hits))
+        Ok((row, self.hits))
     }
 }
 
@@ -648,6 +649,7 @@ struct PovMeasure {
     accuracy: f64,
     ex: povray::PovExport,
     hits: HitImage,
+    error: PeerHitError,
     warnings: Vec<String>,
     max_gradient_found: Option<f64>,
     times: Timings,
@@ -663,6 +665,8 @@ impl PovMeasure {
         label: String,
         interpolation: Interpolation,
         accuracy: f64,
+        reference: &HitImage,
+        checker: Option<f64>,
     ) -> Result<PovMeasure, BenchError> {
         let pov_opts = PovOptions {
             interpolation,
@@ -679,12 +683,14 @@ impl PovMeasure {
                 hits.width, hits.height, scene.width, scene.height
             )));
         }
+        let error = error_vs_reference(&label, &hits, reference, checker)?;
         Ok(PovMeasure {
             label,
             interpolation,
             accuracy,
             ex,
             hits,
+            error,
             warnings: hits_run.stats.warnings.clone(),
             max_gradient_found: hits_run.stats.max_gradient_found,
             times: Timings::default(),
@@ -716,14 +722,8 @@ impl PovMeasure {
     }
 
     /// The row, its hits and its warnings.
-    fn finish(
-        self,
-        opts: &PeerOptions,
-        reference: &HitImage,
-        checker: Option<f64>,
-    ) -> Result<(PeerRow, HitImage, Vec<String>), BenchError> {
+    fn finish(self, opts: &PeerOptions) -> Result<(PeerRow, HitImage, Vec<String>), BenchError> {
         let label = &self.label;
-        let error = error_vs_reference(label, &self.hits, reference, checker)?;
         let (ex, t) = (&self.ex, &self.times);
         let row = PeerRow {
             renderer: "povray".into(),
@@ -741,7 +741,7 @@ impl PovMeasure {
             frame_ms: stats_of(label, &t.frames)?,
             process_ms: Some(stats_of(label, &t.process)?),
             render_cpu_ms: (!t.cpu.is_empty()).then(|| median(&t.cpu)),
-            error,
+            error: self.error.clone(),
             max_gradient: Some(ex.max_gradient),
             gradient_estimate: Some(ex.gradient_estimate),
             contained_by: Some(ex.contained_by),

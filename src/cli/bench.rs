@@ -193,7 +193,7 @@ impl Observer for Bar {
         let b = indicatif::ProgressBar::new(total as u64);
         b.set_style(
             indicatif::ProgressStyle::with_template(
-                "[{bar:30}] {pos}/{len} configurations, {elapsed} elapsed, ETA {eta}  {wide_msg}",
+                "[{bar:30}] {pos}/{len} runs, {elapsed} elapsed, ETA {eta}  {wide_msg}",
             )
             .expect("valid template")
             .progress_chars("=> "),
@@ -209,11 +209,19 @@ impl Observer for Bar {
     }
 
     fn finish(&mut self, line: &str) {
+        self.note(line);
+        self.tick();
+    }
+
+    fn tick(&mut self) {
+        if let Some(b) = &self.bar {
+            b.inc(1);
+        }
+    }
+
+    fn note(&mut self, line: &str) {
         match &self.bar {
-            Some(b) => {
-                b.suspend(|| eprintln!("{line}"));
-                b.inc(1);
-            }
+            Some(b) => b.suspend(|| eprintln!("{line}")),
             None => eprintln!("{line}"),
         }
     }

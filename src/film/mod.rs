@@ -81,7 +81,8 @@ impl TileTarget<'_> {
     /// The element of the pixel at `row`, `col` of the rectangle.
     ///
     /// # Panics
-    /// When the pixel lies outside the rectangle.
+    /// When the pixel lies outside the rectangle. This check is what makes
+    /// the safe writers below sound: keep it an `assert!`.
     #[inline(always)]
     fn at(&self, row: usize, col: usize) -> usize {
         assert!(

@@ -333,9 +333,10 @@ impl<T: Coefficient> Field<T> {
 mod tests {
     use super::*;
 
-    /// The AVX-512 cubic kernel gives the generic lane loops' coefficients
-    /// bit for bit (both fused), for cubic filters over both storages, on
-    /// segments in general position and along axes and diagonals.
+    /// The AVX-512 cubic and quadratic kernels give the generic lane loops'
+    /// coefficients bit for bit (both fused), for three cubic filters and
+    /// the quadratic B-spline over `f64`, `f32` and `f16` storage, on
+    /// segments in general position and along axes.
     #[test]
     fn lane_kernels_are_the_generic_restriction_bitwise() {
         use crate::phantom::{mix64, uniform};

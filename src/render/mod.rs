@@ -2,15 +2,15 @@
 //! staged queues (see [`stages`]), tiles in parallel.
 //!
 //! ```text
-//! for each tile (in parallel):
+//! for each tile (in parallel), into its rectangle of the film:
 //!     generate → entry → { traverse → solve → refract }* → record
-//! film ← tiles (in tile order)
+//! post stage (PRSS, footprint) over the film
 //! ```
 //!
 //! Determinism: every pixel's value is computed by the same arithmetic on the
-//! same inputs whichever thread runs its tile, counters are integer sums, and
-//! tiles are assembled in a fixed order, so the output is the same bits for
-//! any thread count.
+//! same inputs whichever thread runs its tile, each tile writes only its own
+//! rectangle, and counters are integer sums added in tile order, so the
+//! output is the same bits for any thread count.
 
 pub mod context;
 pub mod first_hit;

@@ -116,6 +116,7 @@ pub fn tiles(width: u32, height: u32, size: u32) -> Vec<Tile> {
 /// not a division by the tile's width.
 #[inline(always)]
 pub fn rect_slot(row: u32, col: u32) -> u32 {
+    debug_assert!(row < MAX_RECT_SIDE && col < MAX_RECT_SIDE);
     row << 8 | col
 }
 
@@ -182,6 +183,12 @@ pub struct OwnPixels {
 impl<'f> TileOut<'f> {
     /// A tile writing `region` into `target`, its rectangle of the film.
     pub fn in_film(region: Region, mut target: TileTarget<'f>) -> TileOut<'f> {
+        if let Region::Rect(t) = &region {
+            assert!(
+                t.width() <= MAX_RECT_SIDE && t.height() <= MAX_RECT_SIDE,
+                "rectangles are at most {MAX_RECT_SIDE} pixels a side"
+            );
+        }
         target.clear();
         TileOut::with(region, Pixels::Film(target))
     }

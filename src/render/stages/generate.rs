@@ -58,7 +58,8 @@ pub fn generate<'a, T: Coefficient>(
         crate::with_isa!(Isa::current(), _L, _M => centre_runs(cam, *tile, width, runs));
         return;
     }
-    // Pixels come in the region's order, which is its output's.
+    // Pixels come in the region's order; a rectangle's slot is the pixel's
+    // row and column in it (`rect_slot`), a list's its position.
     let mut next_slot = 0;
     region.for_each_pixel(width, |px, py| {
         let slot = match region {

@@ -1,5 +1,6 @@
 //! The pipeline's stages. Each one drains an input queue of ray indices and
-//! pushes every ray into exactly one output queue:
+//! pushes every ray into exactly one output queue (but for the straight rays
+//! below):
 //!
 //! ```text
 //! generate ─▶ entry ─┬─▶ traverse ─┬─▶ solve ─┬─▶ refract ─┬─▶ traverse
