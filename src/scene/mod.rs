@@ -381,8 +381,9 @@ fn default_tolerance() -> f64 {
 const TILE_RAYS: u32 = 1024;
 
 /// The default tile side for `rays_per_pixel` first-pass rays: the largest
-/// power of two up to 32 whose tile holds at most [`TILE_RAYS`] rays
-/// (within a factor of two), at least 1. A tile's rays go through the
+/// power of two up to 32 whose tile traces at most twice [`TILE_RAYS`]
+/// rays (32 pixels at one ray a pixel, 16 at 2×2 grid or jitter
+/// supersampling, 8 at 4×4), at least 1. A tile's rays go through the
 /// stages together, and it ends with a tail of rounds in which a few rays
 /// (several refractions deep, or reflected inside) leave the vector lanes
 /// mostly empty; bigger tiles share that tail among more rays, while a
