@@ -413,36 +413,7 @@ impl<T: Coefficient> Field<T> {
         q: &[[f64; L]; 3],
     ) -> ([f64; L], [[f64; L]; 3]) {
         #[cfg(target_arch = "x86_64")]
-        if S == 4 && L == 8 {
-            let data = self.coeffs.data();
-            let mut t = [[0.0f64; 8]; 3];
-            let mut cell = [[0isize; 8]; 3];
-            for a in 0..3 {
-                let mut qa = [0.0f64; 8];
-                // In bounds: this branch runs only with `L == 8`.
-                qa.copy_from_slice(&q[a][..8]);
-                (cell[a], t[a]) = self.kernel.locate_lanes(&qa);
-            }
-            let poly: [[f64; 4]; 4] =
-                std::array::from_fn(|j| std::array::from_fn(|m| self.kernel.weight_poly(j)[m]));
-            let (sy, sz) = (self.coeffs.stride(1), self.coeffs.stride(2));
-            let span = 3 * (sy + sz) + 4;
-            let base: [usize; 8] = std::array::from_fn(|l| {
-                let b = self.coeffs.offset(cell[0][l], cell[1][l], cell[2][l]);
-                assert!(b + span <= data.len(), "neighbourhood inside the grid");
-                b
-            });
-            // SAFETY: every row lies in `base + span <= data.len()`
-            // (asserted); L == 8 only under AVX-512 (caller).
-            let (v, g) =
-                unsafe { crate::simd::cubic_value_grad_x8(data, &base, (sy, sz), &t, &poly) };
-            return (
-                std::array::from_fn(|l| v[l]),
-                std::array::from_fn(|a| std::array::from_fn(|l| g[a][l])),
-            );
-        }
-        #[cfg(target_arch = "x86_64")]
-        if S == 3 && L == 8 {
+        if (S == 3 || S == 4) && L == 8 {
             let data = self.coeffs.data();
             let mut t = [[0.0f64; 8]; 3];
             let mut cell = [[0isize; 8]; 3];
@@ -451,18 +422,31 @@ impl<T: Coefficient> Field<T> {
                 (cell[a], t[a]) = self.kernel.locate_lanes(&qa);
             }
             let (sy, sz) = (self.coeffs.stride(1), self.coeffs.stride(2));
-            // The kernel reads each row of three as a row of four.
-            let span = 2 * (sy + sz) + 4;
             let base: [usize; 8] =
                 std::array::from_fn(|l| self.coeffs.offset(cell[0][l], cell[1][l], cell[2][l]));
-            if base.iter().all(|&b| b + span <= data.len()) {
+            // Rows of `S` from each base; the quadratic kernel reads each
+            // row of three as a row of four.
+            let span = (S - 1) * (sy + sz) + 4;
+            let inside = base.iter().all(|&b| b + span <= data.len());
+            let found = if S == 4 {
+                assert!(inside, "neighbourhood inside the grid");
+                let poly: [[f64; 4]; 4] =
+                    std::array::from_fn(|j| std::array::from_fn(|m| self.kernel.weight_poly(j)[m]));
+                // SAFETY: every row lies in `base + span <= data.len()`
+                // (asserted); L == 8 only under AVX-512 (caller).
+                Some(unsafe { crate::simd::cubic_value_grad_x8(data, &base, (sy, sz), &t, &poly) })
+            } else if inside {
                 let poly: [[f64; 3]; 3] =
                     std::array::from_fn(|j| std::array::from_fn(|m| self.kernel.weight_poly(j)[m]));
                 // SAFETY: every row and the value after it lie in `data`
                 // (checked); L == 8 only under AVX-512 (caller).
-                let (v, g) = unsafe {
+                Some(unsafe {
                     crate::simd::quadratic_value_grad_x8(data, &base, (sy, sz), &t, &poly)
-                };
+                })
+            } else {
+                None
+            };
+            if let Some((v, g)) = found {
                 return (
                     std::array::from_fn(|l| v[l]),
                     std::array::from_fn(|a| std::array::from_fn(|l| g[a][l])),
