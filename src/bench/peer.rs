@@ -619,7 +619,7 @@ impl SnellMeasure {
         let row = PeerRow {
             renderer: "snell".into(),
             label: label.clone(),
-            settings: self.overrides.clone(),
+            settings: self.overrides,
             runs: opts.repeats,
             render_ms: stats_of(label, &t.rendered)?,
             prepare_ms: median(&t.prepare),
@@ -630,7 +630,7 @@ impl SnellMeasure {
                 Some(stats_of(label, &t.process)?)
             },
             render_cpu_ms: None,
-            error: self.error.clone(),
+            error: self.error,
             max_gradient: None,
             gradient_estimate: None,
             contained_by: None,
@@ -741,7 +741,7 @@ impl PovMeasure {
             frame_ms: stats_of(label, &t.frames)?,
             process_ms: Some(stats_of(label, &t.process)?),
             render_cpu_ms: (!t.cpu.is_empty()).then(|| median(&t.cpu)),
-            error: self.error.clone(),
+            error: self.error,
             max_gradient: Some(ex.max_gradient),
             gradient_estimate: Some(ex.gradient_estimate),
             contained_by: Some(ex.contained_by),

@@ -171,10 +171,9 @@ fn render_field<T: Coefficient>(
         },
     };
     let traced_rect = traced_window(scene, window);
-    let regions: Vec<Region> = tile::tiles(scene.width, scene.height, rs.tile)
+    let rects: Vec<tile::Tile> = tile::tiles(scene.width, scene.height, rs.tile)
         .into_iter()
         .filter_map(|t| t.intersect(&traced_rect))
-        .map(Region::Rect)
         .collect();
     let start = Instant::now();
     // A post stage colours the film from the hit image: the first pass
@@ -189,18 +188,11 @@ fn render_field<T: Coefficient>(
         ..Default::default()
     };
     // The first pass's tiles write their rectangles of the film in place.
-    let rects: Vec<tile::Tile> = regions
-        .iter()
-        .map(|r| match r {
-            Region::Rect(t) => *t,
-            Region::List(_) => unreachable!("the first pass traces rectangles"),
-        })
-        .collect();
     let targets = film.tile_targets(&rects, post.is_none());
-    let tiles = regions
-        .into_iter()
+    let tiles = rects
+        .iter()
         .zip(targets)
-        .map(|(region, target)| (region, Some(target)))
+        .map(|(&rect, target)| (Region::Rect(rect), Some(target)))
         .collect();
     let outs = trace_regions(&ctx, tiles, first, false, progress, traced);
     if let Some(t) = trace.as_deref_mut() {

@@ -183,24 +183,12 @@ pub struct OwnPixels {
 impl<'f> TileOut<'f> {
     /// A tile writing `region` into `target`, its rectangle of the film.
     pub fn in_film(region: Region, mut target: TileTarget<'f>) -> TileOut<'f> {
-        if let Region::Rect(t) = &region {
-            assert!(
-                t.width() <= MAX_RECT_SIDE && t.height() <= MAX_RECT_SIDE,
-                "rectangles are at most {MAX_RECT_SIDE} pixels a side"
-            );
-        }
         target.clear();
         TileOut::with(region, Pixels::Film(target))
     }
 
     /// A tile keeping `region`'s pixels (and colours, with `colours`).
     pub fn owning(region: Region, colours: bool) -> TileOut<'f> {
-        if let Region::Rect(t) = &region {
-            assert!(
-                t.width() <= MAX_RECT_SIDE && t.height() <= MAX_RECT_SIDE,
-                "rectangles are at most {MAX_RECT_SIDE} pixels a side"
-            );
-        }
         let n = region.pixels();
         let own = OwnPixels {
             u: vec![f32::NAN; n],
@@ -211,7 +199,15 @@ impl<'f> TileOut<'f> {
         TileOut::with(region, Pixels::Own(own))
     }
 
+    /// A tile of `region` writing `pixels`: rectangles at most
+    /// [`MAX_RECT_SIDE`] a side, whose slots [`rect_slot`] can address.
     fn with(region: Region, pixels: Pixels<'f>) -> TileOut<'f> {
+        if let Region::Rect(t) = &region {
+            assert!(
+                t.width() <= MAX_RECT_SIDE && t.height() <= MAX_RECT_SIDE,
+                "rectangles are at most {MAX_RECT_SIDE} pixels a side"
+            );
+        }
         TileOut {
             region,
             pixels,
