@@ -90,6 +90,12 @@ impl<'a> HitMap<'a> {
         &self.keys
     }
 
+    /// The film the map reads.
+    #[inline]
+    pub fn film(&self) -> &'a Film {
+        self.film
+    }
+
     #[inline]
     pub fn inside(&self, x: i64, y: i64) -> bool {
         x >= 0 && y >= 0 && x < self.w && y < self.h
@@ -142,6 +148,9 @@ impl<'a> HitMap<'a> {
     /// the same piece: central differences where both sides are, one-sided
     /// where one is.
     pub fn jacobian(&self, x: i64, y: i64, centre: [f64; 2], ev: f32) -> Jacobian {
+        if x >= 1 && y >= 1 && x + 1 < self.w && y + 1 < self.h {
+            return self.jacobian_inside(x, y, centre, ev);
+        }
         let deriv = |dx: i64, dy: i64| -> Option<[f64; 2]> {
             let f = self.consistent(x + dx, y + dy, ev);
             let b = self.consistent(x - dx, y - dy, ev);
@@ -155,6 +164,30 @@ impl<'a> HitMap<'a> {
         Jacobian {
             dx: deriv(1, 0),
             dy: deriv(0, 1),
+        }
+    }
+
+    /// [`HitMap::jacobian`] at a pixel whose four neighbours are inside the
+    /// image, the same bits with selects for the four cases: at a boundary,
+    /// where PRSS asks for Jacobians, their branches mispredict.
+    #[inline]
+    fn jacobian_inside(&self, x: i64, y: i64, centre: [f64; 2], ev: f32) -> Jacobian {
+        let at = (y * self.w + x) as usize;
+        let deriv = |step: usize| {
+            let (f, b) = (at + step, at - step);
+            let (on_f, on_b) = (self.keys[f] == ev, self.keys[b] == ev);
+            let hit = |i: usize| [self.film.u[i] as f64, self.film.v[i] as f64];
+            // Both: the central difference; one: the one-sided difference
+            // against the centre (times 1, exactly).
+            let ahead = if on_f { hit(f) } else { centre };
+            let behind = if on_b { hit(b) } else { centre };
+            let half = if on_f && on_b { 0.5 } else { 1.0 };
+            let d = [half * (ahead[0] - behind[0]), half * (ahead[1] - behind[1])];
+            (on_f || on_b).then_some(d)
+        };
+        Jacobian {
+            dx: deriv(1),
+            dy: deriv(self.w as usize),
         }
     }
 
