@@ -151,6 +151,12 @@ impl<'a> HitMap<'a> {
         if x >= 1 && y >= 1 && x + 1 < self.w && y + 1 < self.h {
             return self.jacobian_inside(x, y, centre, ev);
         }
+        self.jacobian_checked(x, y, centre, ev)
+    }
+
+    /// [`HitMap::jacobian`] anywhere: each neighbour looked up with its
+    /// bounds and piece checked.
+    fn jacobian_checked(&self, x: i64, y: i64, centre: [f64; 2], ev: f32) -> Jacobian {
         let deriv = |dx: i64, dy: i64| -> Option<[f64; 2]> {
             let f = self.consistent(x + dx, y + dy, ev);
             let b = self.consistent(x - dx, y - dy, ev);
@@ -226,6 +232,35 @@ mod tests {
             }
         }
         film
+    }
+
+    /// The selects give the checked lookups' Jacobian, bit for bit, on a
+    /// film of three pieces and holes without a hit.
+    #[test]
+    fn inside_jacobian_matches_the_checked_one() {
+        let f = film(24, 20, |x, y| {
+            let k = crate::phantom::mix64((y * 24 + x) as u64);
+            let u = |j| crate::phantom::uniform(k, j) as f32;
+            (u(0) > 0.2).then(|| ([x as f32 + u(1), 0.5 * y as f32 - u(2)], (k % 3) as f32))
+        });
+        let m = HitMap::new(&f);
+        let mut cases = [0usize; 4];
+        for y in 1..19 {
+            for x in 1..23 {
+                let Some((hit, ev)) = m.at(x, y) else {
+                    continue;
+                };
+                let (fast, checked) =
+                    (m.jacobian(x, y, hit, ev), m.jacobian_checked(x, y, hit, ev));
+                assert_eq!(fast, checked, "({x}, {y})");
+                let one = |d: i64| {
+                    let on = |i: i64, j: i64| m.consistent(i, j, ev).is_some();
+                    (on(x + d, y) as usize) + 2 * (on(x - d, y) as usize)
+                };
+                cases[one(1)] += 1;
+            }
+        }
+        assert!(cases.iter().all(|&c| c > 10), "cases {cases:?}");
     }
 
     #[test]

@@ -221,7 +221,9 @@ struct HatBand {
     /// over quadrant `q = 2·(y side) + (x side)`, and step `k` adds each
     /// quadrant's `k`-th sub-point (lowest first, as [`bits`] visits them;
     /// past a quadrant's last, weight 0 at bit 0). So every lane adds its
-    /// weights in the order the per-mask sums did, to the same bits.
+    /// weights in the order the per-mask sums did, to the same bits (an
+    /// empty sum aside: +0 where they gave −0, which adds nothing to a
+    /// colour).
     lanes: Vec<HatStep>,
 }
 
@@ -2321,6 +2323,44 @@ mod tests {
             lines > 100 && hats > 1000 && parities > 200 && moved > 200,
             "{lines} lines, {hats} hats, {parities} checker parities, {moved} moved looks"
         );
+    }
+
+    /// The lanes' sums are the per-mask sums [`Ctx::band_sum`] makes, bit
+    /// for bit, for every lane and both parities, whatever the sub-point
+    /// count (the bands of 3 and 11 per axis have quadrants of unequal
+    /// sizes, and 11 two bands).
+    #[test]
+    fn hat_lanes_sum_as_the_masks_do() {
+        let weight = |m: u64, w: &[f64; 64]| -> f64 { bits(m).map(|i| w[i]).sum() };
+        let mut checked = 0;
+        for n in [8, 3, 5, 11] {
+            for band in &Hats::new(n).bands {
+                for trial in 0..50u64 {
+                    let odd: [u64; 16] = std::array::from_fn(|k| {
+                        crate::phantom::mix64(trial * 16 + k as u64 + 1000 * n as u64)
+                    });
+                    let (even_w, odd_w) = hat_sums(&band.lanes, &odd);
+                    for k in 0..16 {
+                        let (quadrant, r) = (band.quadrant[k / 8][k / 4 % 2], k % 4);
+                        let mask = quadrant & band.nonzero[r];
+                        let w = &band.hat[r];
+                        for (got, want) in [
+                            (even_w[k], weight(mask & !odd[k], w)),
+                            (odd_w[k], weight(mask & odd[k], w)),
+                        ] {
+                            // An empty sum is −0 from `Iterator::sum` and +0
+                            // here; either, times a colour, adds nothing.
+                            assert!(
+                                got.to_bits() == want.to_bits() || (got == 0.0 && want == 0.0),
+                                "n {n} lane {k}: {got:e} against {want:e}"
+                            );
+                        }
+                        checked += 1;
+                    }
+                }
+            }
+        }
+        assert!(checked > 3000);
     }
 
     /// The quantile starts within 1e-6 of the converged one, which inverts
