@@ -260,6 +260,18 @@ pub enum Supersampling {
     Footprint,
 }
 
+impl Supersampling {
+    /// Rays a pixel sends in the first pass with `samples` per axis: the
+    /// centre's, and for real supersampling the grid's or strata's too.
+    pub fn first_pass_rays(self, samples: u32) -> u64 {
+        let n = samples as u64;
+        match self {
+            Supersampling::Grid | Supersampling::Jitter => n * n + 1,
+            _ => 1,
+        }
+    }
+}
+
 /// What PRSS does where a pixel's neighbours cannot be interpolated (no
 /// backdrop hit, or a different number of interfaces crossed).
 #[derive(Deserialize, Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
@@ -621,7 +633,6 @@ impl Scene {
     pub fn rays_per_pixel(&self) -> u64 {
         let n = self.render.samples as u64;
         match self.render.supersampling {
-            Supersampling::Grid | Supersampling::Jitter => n * n + 1,
             Supersampling::Prss | Supersampling::Footprint
                 if matches!(
                     self.render.prss_fallback,
@@ -630,7 +641,7 @@ impl Scene {
             {
                 n * n
             }
-            _ => 1,
+            s => s.first_pass_rays(self.render.samples),
         }
     }
 
@@ -960,21 +971,19 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             format!("must be in [1e-12, 0.1] voxels, got {}", r.tolerance),
         ));
     }
-    let first_pass_rays = match r.supersampling {
-        Supersampling::Grid | Supersampling::Jitter => r.samples.min(64).pow(2) + 1,
-        _ => 1,
-    };
-    let tile = r.tile.unwrap_or_else(|| default_tile(first_pass_rays));
-    if tile == 0 || tile > 256 {
-        return Err(bad(
-            "render.tile",
-            format!("must be in 1..=256, got {tile}"),
-        ));
-    }
     if r.samples == 0 || r.samples > 64 {
         return Err(bad(
             "render.samples",
             format!("must be in 1..=64, got {}", r.samples),
+        ));
+    }
+    let tile = r
+        .tile
+        .unwrap_or_else(|| default_tile(r.supersampling.first_pass_rays(r.samples) as u32));
+    if tile == 0 || tile > 256 {
+        return Err(bad(
+            "render.tile",
+            format!("must be in 1..=256, got {tile}"),
         ));
     }
     if r.prss_samples == 0 || r.prss_samples > 64 {
