@@ -1312,43 +1312,31 @@ pub(super) trait Real:
     fn min(self, other: Self) -> Self;
 }
 
-impl Real for f64 {
-    #[inline(always)]
-    fn of(v: f32) -> f64 {
-        v as f64
-    }
-    #[inline(always)]
-    fn abs(self) -> f64 {
-        f64::abs(self)
-    }
-    #[inline(always)]
-    fn max(self, other: f64) -> f64 {
-        if self > other { self } else { other }
-    }
-    #[inline(always)]
-    fn min(self, other: f64) -> f64 {
-        if self < other { self } else { other }
-    }
+/// [`Real`] for the float types: `max`/`min` as a compare and select.
+macro_rules! real_float {
+    ($($t:ty),*) => {$(
+        impl Real for $t {
+            #[inline(always)]
+            fn of(v: f32) -> $t {
+                <$t>::from(v)
+            }
+            #[inline(always)]
+            fn abs(self) -> $t {
+                <$t>::abs(self)
+            }
+            #[inline(always)]
+            fn max(self, other: $t) -> $t {
+                if self > other { self } else { other }
+            }
+            #[inline(always)]
+            fn min(self, other: $t) -> $t {
+                if self < other { self } else { other }
+            }
+        }
+    )*};
 }
 
-impl Real for f32 {
-    #[inline(always)]
-    fn of(v: f32) -> f32 {
-        v
-    }
-    #[inline(always)]
-    fn abs(self) -> f32 {
-        f32::abs(self)
-    }
-    #[inline(always)]
-    fn max(self, other: f32) -> f32 {
-        if self > other { self } else { other }
-    }
-    #[inline(always)]
-    fn min(self, other: f32) -> f32 {
-        if self < other { self } else { other }
-    }
-}
+real_float!(f64, f32);
 
 /// Both coordinates of a hit as one [`Real`], lane by lane:
 /// [`bicubic_in_one_square`] runs the two axes' chains of sums and compares
