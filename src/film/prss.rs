@@ -716,9 +716,9 @@ fn window_sums_inside(
     let (mut num, mut dnum) = (0.0, [0.0; 2]);
     for (j, row) in ew.w.chunks_exact(EDGE_SIDE).enumerate() {
         let at = ((y - r + j as i64) * map.w + x - r) as usize;
-        // Without branches (a window across a boundary mispredicts them):
-        // a pixel off the piece adds an exact zero, so the sums keep their
-        // bits.
+        // Without branches (across a boundary they go either way; teapot,
+        // the edge lines 14–15 → 10–12 M cycles a frame): a pixel off the
+        // piece adds an exact zero, so the sums keep their bits.
         for (&k, &[w, gx, gy]) in map.keys()[at..at + EDGE_SIDE].iter().zip(row) {
             let on = if k == key { 1.0 } else { 0.0 };
             num += on * w;
@@ -1085,8 +1085,8 @@ fn bits(mut m: u64) -> impl Iterator<Item = usize> {
 
 /// The pixel's own surface under its sub-points, for [`Ctx::blend`].
 enum Own {
-    /// One colour everywhere: the background (a pixel without a hit, or
-    /// none wanted), or a surface in one checker square.
+    /// One colour everywhere: the background (a pixel without a hit), or
+    /// none wanted (the footprint mode adds its own filtered colour).
     Flat([f32; 3]),
     /// A checkerboard: bit `ix` of `rows[jy]` is the square parity at
     /// sub-point `(ix, jy)` ([`checker_parities`]).
@@ -1149,7 +1149,8 @@ fn grid(
 ) -> Option<Grid> {
     // Which of the 5×5 neighbours are on the centre's piece (`r` ≤ 2), from
     // the piece keys without branches where the window is inside the image
-    // (at a boundary, the lookups' branches mispredict).
+    // (the checked lookups branch on each neighbour, which at a boundary
+    // goes either way).
     let mut on = [[false; 5]; 5];
     let m = &c.map;
     if x >= 2 && y >= 2 && x + 2 < m.w && y + 2 < m.h {
