@@ -1869,67 +1869,7 @@ pub fn shade(
         // (as the tiles, see `render::trace_regions`).
         .with_max_len(1)
         .map(|(band, colors)| {
-            let y0 = band * BAND_ROWS;
-            let rows = colors.len() / w.max(1);
-            let mut st = PostStats::default();
-            let mut flagged = Vec::new();
-            let mut classes = Vec::new();
-            if let Some((size, _)) = interior {
-                classes = vec![Interior::No; rows * w];
-                classify_rows(film, y0, y0 + rows, size, &mut classes);
-            }
-            let mut i = 0;
-            while i < colors.len() {
-                // Runs of pixels in one square: their centres' colours in
-                // vector lanes (most pixels of a frame).
-                if let Some((size, checker)) = interior
-                    && i % w + ONE_SQUARE_RUN <= w
-                    && classes[i..i + ONE_SQUARE_RUN]
-                        .iter()
-                        .all(|&c| c == Interior::OneSquare)
-                {
-                    let at = y0 * w + i;
-                    let run = &mut colors[i..i + ONE_SQUARE_RUN];
-                    one_square_colours(&film.u[at..], &film.v[at..], size, checker, run);
-                    st.pixels += ONE_SQUARE_RUN as u64;
-                    st.quadrants_interpolated += 4 * ONE_SQUARE_RUN as u64;
-                    i += ONE_SQUARE_RUN;
-                    continue;
-                }
-                let (x, y) = ((i % w) as i64, (y0 + i / w) as i64);
-                let pixel = (y * c.map.w + x) as u32;
-                let hit = c.map.at(x, y).is_some();
-                let col = if !hit {
-                    no_hit_pixel(&c, x, y, &mut st)
-                } else {
-                    st.pixels += 1;
-                    match s.mode {
-                        Mode::Prss => match (interior, classes.get(i)) {
-                            (Some((size, colors)), Some(&class)) if class != Interior::No => {
-                                st.quadrants_interpolated += 4;
-                                Some(prss_interior_checker(&c, film, (x, y), class, size, colors))
-                            }
-                            _ => prss_pixel(&c, x, y, &mut st),
-                        },
-                        Mode::Footprint => footprint_pixel(&c, x, y, &mut st),
-                    }
-                };
-                colors[i] = match col {
-                    Some(col) => col,
-                    None => {
-                        flagged.push(pixel);
-                        st.pixels_flagged += 1;
-                        let p = pixel as usize;
-                        if hit {
-                            backdrop.color(film.u[p] as f64, film.v[p] as f64)
-                        } else {
-                            background
-                        }
-                    }
-                };
-                i += 1;
-            }
-            (flagged, st)
+            crate::with_isa!(crate::simd::Isa::current(), _L, _M => shade_band(&c, film, band, colors, interior))
         })
         .collect();
     let mut out = PostResult {
@@ -1942,6 +1882,86 @@ pub fn shade(
         out.stats.add(&st);
     }
     out
+}
+
+/// Shades band `band` of rows into `colors`: the flagged pixels and the
+/// band's counters. Inlined into `with_isa!`'s function for the running
+/// instruction set, so the per-pixel code between the lane kernels (the
+/// classes, the pixel dispatch, the Jacobians and blends) is compiled for it
+/// too rather than for baseline SSE2: the same operations, so the same bits
+/// (no contraction into fused multiply-adds); sphere PRSS stage 11.48 →
+/// 10.96 ms single thread (min of 5 alternating runs), teapot 32.3 → 31.9.
+#[inline(always)]
+fn shade_band(
+    c: &Ctx,
+    film: &Film,
+    band: usize,
+    colors: &mut [[f32; 3]],
+    interior: Option<(f64, &[[f32; 3]; 2])>,
+) -> (Vec<u32>, PostStats) {
+    let (s, backdrop, background) = (c.s, c.backdrop, c.background);
+    let w = film.width as usize;
+    let y0 = band * BAND_ROWS;
+    let rows = colors.len() / w.max(1);
+    let mut st = PostStats::default();
+    let mut flagged = Vec::new();
+    let mut classes = Vec::new();
+    if let Some((size, _)) = interior {
+        classes = vec![Interior::No; rows * w];
+        classify_rows(film, y0, y0 + rows, size, &mut classes);
+    }
+    let mut i = 0;
+    while i < colors.len() {
+        // Runs of pixels in one square: their centres' colours in
+        // vector lanes (most pixels of a frame).
+        if let Some((size, checker)) = interior
+            && i % w + ONE_SQUARE_RUN <= w
+            && classes[i..i + ONE_SQUARE_RUN]
+                .iter()
+                .all(|&c| c == Interior::OneSquare)
+        {
+            let at = y0 * w + i;
+            let run = &mut colors[i..i + ONE_SQUARE_RUN];
+            one_square_colours(&film.u[at..], &film.v[at..], size, checker, run);
+            st.pixels += ONE_SQUARE_RUN as u64;
+            st.quadrants_interpolated += 4 * ONE_SQUARE_RUN as u64;
+            i += ONE_SQUARE_RUN;
+            continue;
+        }
+        let (x, y) = ((i % w) as i64, (y0 + i / w) as i64);
+        let pixel = (y * c.map.w + x) as u32;
+        let hit = c.map.at(x, y).is_some();
+        let col = if !hit {
+            no_hit_pixel(c, x, y, &mut st)
+        } else {
+            st.pixels += 1;
+            match s.mode {
+                Mode::Prss => match (interior, classes.get(i)) {
+                    (Some((size, colors)), Some(&class)) if class != Interior::No => {
+                        st.quadrants_interpolated += 4;
+                        Some(prss_interior_checker(c, film, (x, y), class, size, colors))
+                    }
+                    _ => prss_pixel(c, x, y, &mut st),
+                },
+                Mode::Footprint => footprint_pixel(c, x, y, &mut st),
+            }
+        };
+        colors[i] = match col {
+            Some(col) => col,
+            None => {
+                flagged.push(pixel);
+                st.pixels_flagged += 1;
+                let p = pixel as usize;
+                if hit {
+                    backdrop.color(film.u[p] as f64, film.v[p] as f64)
+                } else {
+                    background
+                }
+            }
+        };
+        i += 1;
+    }
+    (flagged, st)
 }
 
 #[cfg(test)]
