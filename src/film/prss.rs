@@ -1554,10 +1554,17 @@ fn prss_interior_checker(
             .backdrop
             .color(film.u[centre] as f64, film.v[centre] as f64);
     }
-    let g: Grid = std::array::from_fn(|j| {
+    // Filled in place: built by nested `array::from_fn`, the rows were
+    // closures called out of line and the grid copied into place (a
+    // `memmove` per pixel).
+    let mut g: Grid = [[[0.0; 2]; 5]; 5];
+    for (j, row) in g.iter_mut().enumerate() {
         let start = centre + j * w - 2 * w - 2;
-        std::array::from_fn(|i| [film.u[start + i] as f64, film.v[start + i] as f64])
-    });
+        let (u, v) = (&film.u[start..start + 5], &film.v[start..start + 5]);
+        for i in 0..5 {
+            row[i] = [u[i] as f64, v[i] as f64];
+        }
+    }
     match class {
         Interior::StraddlesU => checker_average_on::<U>(&g, &c.taps, size, colors),
         Interior::StraddlesV => checker_average_on::<V>(&g, &c.taps, size, colors),
