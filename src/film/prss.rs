@@ -1554,17 +1554,16 @@ fn prss_interior_checker(
             .backdrop
             .color(film.u[centre] as f64, film.v[centre] as f64);
     }
-    // Filled in place: built by nested `array::from_fn`, the rows were
+    // Array literals: built by nested `array::from_fn`, the rows were
     // closures called out of line and the grid copied into place (a
-    // `memmove` per pixel).
-    let mut g: Grid = [[[0.0; 2]; 5]; 5];
-    for (j, row) in g.iter_mut().enumerate() {
+    // `memmove` per pixel); filled in place, it was zeroed first.
+    let row = |j: usize| {
         let start = centre + j * w - 2 * w - 2;
         let (u, v) = (&film.u[start..start + 5], &film.v[start..start + 5]);
-        for i in 0..5 {
-            row[i] = [u[i] as f64, v[i] as f64];
-        }
-    }
+        let at = |i: usize| [u[i] as f64, v[i] as f64];
+        [at(0), at(1), at(2), at(3), at(4)]
+    };
+    let g: Grid = [row(0), row(1), row(2), row(3), row(4)];
     match class {
         Interior::StraddlesU => checker_average_on::<U>(&g, &c.taps, size, colors),
         Interior::StraddlesV => checker_average_on::<V>(&g, &c.taps, size, colors),
@@ -1635,7 +1634,11 @@ fn checker_average_on<const AXES: u8>(
     colors: &[[f32; 3]; 2],
 ) -> [f32; 3] {
     let inv = 1.0 / size;
-    let gs: Grid = g.map(|row| row.map(|p| [p[0] * inv, p[1] * inv]));
+    // In place: `Grid::map` left its closures out of line.
+    let mut gs: Grid = *g;
+    for p in gs.iter_mut().flatten() {
+        *p = [p[0] * inv, p[1] * inv];
+    }
     let n = taps.t.len();
     let isa = crate::simd::Isa::current();
     let mut odd = crate::with_isa!(isa, L, _M => if L >= 4 {

@@ -158,8 +158,9 @@ impl<'a> Rays<'a> {
     /// `org` (a perspective camera's): their identities (image pixels from
     /// `pixel`, output slots from `slot`, consecutive), unit weight, and
     /// directions `dir[axis][lane]`. A slice per column where a push per ray
-    /// and column cost most of the generate stage.
-    #[inline]
+    /// and column cost most of the generate stage. Inlined into the entry
+    /// stage, whose instruction set it then runs in.
+    #[inline(always)]
     pub fn push_centre_run(
         &mut self,
         (pixel, slot): (u32, u32),

@@ -76,7 +76,9 @@ fn record_runs<T: Coefficient>(
 /// `org`, directions `dir[axis][lane]`, lane `l` writing output slot
 /// `slot + l`) that go straight to the backdrop from the camera: what
 /// [`record`] writes for them, without their ever entering the packet (see
-/// [`super::entry`]).
+/// [`super::entry`]). Inlined into the entry stage, whose instruction set
+/// it then runs in.
+#[inline(always)]
 pub fn record_straight<T: Coefficient>(
     ctx: &Ctx<T>,
     org: [f64; 3],
