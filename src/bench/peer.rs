@@ -959,10 +959,11 @@ at lower error — {}.",
                     format!("**met** by {} ({} per frame)", b.snell, ratio(b.frame)),
                 Some(b) => format!(
                     "**not met**: the fastest snell row with lower error ({}) is {} faster per \
-frame, {} by render against trace",
+frame, {} by render against trace and {} by whole process",
                     b.snell,
                     ratio(b.frame),
-                    ratio(b.render)
+                    ratio(b.render),
+                    b.process.map_or("–".into(), ratio)
                 ),
                 None => "**not met**: no snell row has lower error at both p50 and p90".into(),
             }
