@@ -57,8 +57,9 @@ pub fn refract<const S: usize, T: Coefficient>(
 }
 
 /// Crossings per run: two AVX-512 vectors of `f64` (four AVX2 ones), so
-/// that one group's gradient loads and arithmetic overlap the other's, and
-/// the bending and clipping run over 16 lanes. Against runs of one vector
+/// that one group's gradient loads and arithmetic can overlap the other's
+/// (the likely reason for the gain below), and the bending and clipping run
+/// over 16 lanes. Against runs of one vector
 /// (8), single thread, min of 5 (3) alternating runs: refract stage sphere
 /// 15.48 → 15.04 ms, teapot 37.2 → 36.0, cranium 22.8 → 21.8; runs of 32
 /// gained nothing more on the sphere.
