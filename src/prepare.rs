@@ -104,10 +104,11 @@ impl Accel {
     }
 
     /// Sub-cell masks of the tagged cells, built on first use for the
-    /// Bézier classification when they fit [`TABLE_BUDGET`] (the paper's BMCC
-    /// and ACCC are measured at their own resolution): filed from those the
-    /// classification found, or computed when the tags came from the disk
-    /// cache; returns them (or `None`) and the build time.
+    /// methods that have them ([`Method::has_masks`]: the Bézier hull, and
+    /// ACCC per 2³ or 4³ sub-cells; the paper's BMCC and ACCC are measured at
+    /// their own resolution) when they fit [`TABLE_BUDGET`]: filed from those
+    /// the classification found, or computed when the tags came from the
+    /// disk cache; returns them (or `None`) and the build time.
     pub fn masks(&self, field: &AnyField) -> (Option<&SubCellMasks>, f64) {
         let (m, s) = timed_once(&self.masks, || {
             // Taken whatever happens, so an unused find is not kept.
@@ -117,9 +118,7 @@ impl Accel {
                 .unwrap_or_else(|e| e.into_inner())
                 .take();
             let count = self.octree.tags().count();
-            if !(matches!(self.method, Method::Bezier(_))
-                && self.table_fits(SubCellMasks::bytes_for(count)))
-            {
+            if !(self.method.has_masks() && self.table_fits(SubCellMasks::bytes_for(count))) {
                 return None;
             }
             let cells = self.octree.tags().cells;
@@ -127,8 +126,11 @@ impl Accel {
                 .and_then(|linear| SubCellMasks::from_linear(self.tagged(), cells, &linear))
                 .or_else(|| {
                     let iso = field.separating_iso(self.iso);
-                    Some(with_field!(field, f => {
-                        SubCellMasks::build(f.as_ref(), self.tagged(), iso)
+                    Some(with_field!(field, f => match self.method {
+                        Method::AcccSub(n) => {
+                            SubCellMasks::build_accc(f.as_ref(), self.tagged(), iso, n as usize)
+                        }
+                        _ => SubCellMasks::build(f.as_ref(), self.tagged(), iso),
                     }))
                 })
         });

@@ -181,10 +181,11 @@ fn size_of(s: &Scene) -> Vec<String> {
     ]
 }
 
-const VARIANTS: [&[&str]; 6] = [
+const VARIANTS: [&[&str]; 7] = [
     &["render.traversal=dda", "render.classify=bmcc"],
     &["render.traversal=dda", "render.classify=accc"],
     &["render.traversal=octree", "render.classify=accc"],
+    &["render.traversal=octree", "render.classify=accc4"],
     &[
         "render.traversal=octree",
         "render.classify=bezier",

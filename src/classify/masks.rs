@@ -1,11 +1,13 @@
 //! Sub-cell masks of the tagged cells: which of a cell's 4³ sub-cells the
-//! Bézier hull keeps ([`SubCells`]), so the traversal hands the solve stage
+//! classification keeps — the Bézier hull ([`SubCells`]) or ACCC per
+//! sub-cell ([`SubCellBounds`]) — so the traversal hands the solve stage
 //! only segments that meet one.
 //!
 //! Only tagged cells get a mask (8 bytes each, in [`TaggedIndex`] slots).
 
 use std::sync::Arc;
 
+use super::accc_sub::SubCellBounds;
 use super::bezier::SubCells;
 use super::slack;
 use super::tagged::TaggedIndex;
@@ -13,8 +15,9 @@ use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 
 /// Sub-cell masks by linear cell index (x fastest), ascending, as the
-/// classification finds them ([`crate::classify::bezier::refine_with_masks`])
-/// before the tagged cells have slots.
+/// classification finds them ([`crate::classify::bezier::refine_with_masks`],
+/// [`crate::classify::accc_sub_with_masks`]) before the tagged cells have
+/// slots.
 pub type LinearMasks = Vec<(usize, u64)>;
 
 /// Sub-cell masks of the tagged cells of one classification.
@@ -48,7 +51,25 @@ impl SubCellMasks {
         SubCellMasks { index, masks }
     }
 
-    /// The masks [`crate::classify::bezier::refine_with_masks`] found along
+    /// Masks of every tagged cell of `index` by ACCC per `n³` sub-cells
+    /// ([`SubCellBounds::mask`]) for the (separated) iso-value `iso`; `n`
+    /// must divide 4.
+    pub fn build_accc<T: Coefficient>(
+        field: &Field<T>,
+        index: Arc<TaggedIndex>,
+        iso: f64,
+        n: usize,
+    ) -> SubCellMasks {
+        let bounds = SubCellBounds::new(field.kernel(), n);
+        assert!(bounds.has_masks(), "accc{n} has no 4³ masks");
+        let masks = index.table_init(
+            || bounds.scratch(),
+            |w, cell| bounds.cell_mask(field, cell, iso, w),
+        );
+        SubCellMasks { index, masks }
+    }
+
+    /// The masks [`crate::classify::classify_with_masks`] found along
     /// with the tags `index` was built from: `(linear cell index, mask)` for
     /// the tagged cells of a lattice of `cells`; `None` unless every tagged
     /// cell has exactly one.
@@ -124,6 +145,31 @@ mod tests {
         // No budget, no masks.
         assert!(
             crate::classify::classify_with_masks(&f, iso, Method::Bezier(2), 0)
+                .1
+                .is_none()
+        );
+    }
+
+    #[test]
+    fn sub_cell_accc_masks_file_as_built_and_match_their_tags() {
+        let (f, iso) = noisy_bspline3();
+        for n in [2u8, 4] {
+            let method = Method::AcccSub(n);
+            let (c, found) = crate::classify::classify_with_masks(&f, iso, method, 1 << 30);
+            assert_eq!(
+                c.tags,
+                classify(&f, iso, method).tags,
+                "accc{n}: the same tags"
+            );
+            let index = Arc::new(TaggedIndex::build(&c.tags));
+            let filed = SubCellMasks::from_linear(index.clone(), c.tags.cells, &found.unwrap());
+            let built = SubCellMasks::build_accc(&f, index, iso, n as usize);
+            assert_eq!(filed.unwrap().masks, built.masks, "accc{n}");
+            assert!(built.masks.iter().all(|&m| m != 0));
+        }
+        // The plain ACCC has no sub-cells to keep.
+        assert!(
+            crate::classify::classify_with_masks(&f, iso, Method::Accc, 1 << 30)
                 .1
                 .is_none()
         );

@@ -17,6 +17,7 @@
 //! `bmcc` and `accc` use the signed-weight interval bound of [`bound`] instead,
 //! which stays correct; `bezier` needs no sign assumption at all.
 
+pub mod accc_sub;
 pub mod bezier;
 pub mod bound;
 #[cfg(target_arch = "x86_64")]
@@ -96,6 +97,18 @@ impl Method {
         !matches!(self, Method::Exact)
     }
 
+    /// Whether the method also tells which of a tagged cell's 4³ sub-cells
+    /// can hold the surface ([`SubCellMasks`]), for the traversal to skip
+    /// the segments that meet none: the Bézier hull's, and ACCC's per
+    /// sub-cell when its sub-cells tile the 4³ ones.
+    pub fn has_masks(&self) -> bool {
+        match *self {
+            Method::Bezier(_) => true,
+            Method::AcccSub(n) => (1..=4).contains(&n) && bezier::SUB.is_multiple_of(n as usize),
+            _ => false,
+        }
+    }
+
     /// The methods `snell classify` reports, coarse to fine.
     pub fn all() -> [Method; 7] {
         [
@@ -146,30 +159,43 @@ pub fn classify<T: Coefficient>(field: &Field<T>, iso: f64, method: Method) -> C
     }
 }
 
-/// [`classify`], and for `Method::Bezier(2)` the sub-cell masks of the
-/// tagged cells found on the way ([`bezier::refine_with_masks`]; the same
-/// tags), by linear cell index, when they may fit `mask_budget` bytes
-/// (checked against the candidate cells, which bound the tagged ones).
+/// [`classify`], and for the methods with sub-cell masks
+/// ([`Method::has_masks`]; `Method::Bezier(2)` and `accc2`/`accc4`) the
+/// masks of the tagged cells found on the way ([`bezier::refine_with_masks`],
+/// [`accc_sub_with_masks`]; the same tags), by linear cell index, when they
+/// may fit `mask_budget` bytes (checked against the candidate cells, which
+/// bound the tagged ones).
 pub fn classify_with_masks<T: Coefficient>(
     field: &Field<T>,
     iso: f64,
     method: Method,
     mask_budget: usize,
 ) -> (Classification, Option<masks::LinearMasks>) {
-    if method != Method::Bezier(2) {
-        return (classify(field, iso, method), None);
-    }
     let start = Instant::now();
     let lattice = Lattice::new(field.kernel(), field.dims());
-    let coarse = prefilter_candidates(field, &lattice, iso);
-    let keep_masks = coarse.count() * std::mem::size_of::<(usize, u64)>() <= mask_budget;
-    let (tags, masks) = bezier::refine_with_masks(field, &lattice, iso, &coarse, keep_masks);
+    let fits = |coarse: &Tags| coarse.count() * std::mem::size_of::<(usize, u64)>() <= mask_budget;
+    let (tags, masks) = match method {
+        Method::Bezier(2) => {
+            let coarse = prefilter_candidates(field, &lattice, iso);
+            let keep = fits(&coarse);
+            let (tags, masks) = bezier::refine_with_masks(field, &lattice, iso, &coarse, keep);
+            (tags, keep.then_some(masks))
+        }
+        Method::AcccSub(n) if method.has_masks() => {
+            let coarse = accc(field, &lattice, iso);
+            let keep = fits(&coarse);
+            let (tags, masks) =
+                accc_sub_with_masks(field, &lattice, iso, &coarse, n as usize, keep);
+            (tags, keep.then_some(masks))
+        }
+        _ => return (classify(field, iso, method), None),
+    };
     let c = Classification {
         method,
         tags,
         seconds: start.elapsed().as_secs_f64(),
     };
-    (c, keep_masks.then_some(masks))
+    (c, masks)
 }
 
 /// Slack that keeps bounds conservative under summation rounding.
@@ -300,10 +326,9 @@ fn signed_direct<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) 
     })
 }
 
-/// ACCC per `n³` sub-cells, for the cells `coarse` tagged: a cell stays tagged
-/// if some sub-cell's bound straddles the iso-value. Per-axis weight intervals
-/// over each sub-interval, multiplied as intervals, so it also holds for
-/// signed kernels.
+/// ACCC per `n³` sub-cells ([`accc_sub::SubCellBounds`]), for the cells
+/// `coarse` tagged: a cell stays tagged if some sub-cell's bound straddles
+/// the iso-value.
 pub fn accc_sub<T: Coefficient>(
     field: &Field<T>,
     lattice: &Lattice,
@@ -311,65 +336,53 @@ pub fn accc_sub<T: Coefficient>(
     coarse: &Tags,
     n: usize,
 ) -> Tags {
-    let kernel = field.kernel();
-    let s = kernel.support();
-    // ranges[a][j] = (lo, hi) of W_j over [a/n, (a+1)/n]
-    let ranges: Vec<Vec<(f64, f64)>> = (0..n)
-        .map(|a| {
-            (0..s)
-                .map(|j| kernel.weight_range(j, a as f64 / n as f64, (a + 1) as f64 / n as f64))
-                .collect()
-        })
-        .collect();
-    // The weight-product interval of every support term in every sub-cell
-    // does not depend on the cell: tabulate it once.
-    let s3 = s * s * s;
-    let mut table = vec![(0.0, 0.0); n * n * n * s3];
-    for sub in 0..n * n * n {
-        let (ax, ay, az) = (sub % n, sub / n % n, sub / (n * n));
-        for k in 0..s {
-            for j in 0..s {
-                for i in 0..s {
-                    table[sub * s3 + i + s * (j + s * k)] =
-                        interval_product(ranges[ax][i], ranges[ay][j], ranges[az][k]);
-                }
-            }
-        }
-    }
-    refine_cells(lattice, coarse, |cell| {
-        let d = support_minus_iso(field, cell, iso);
-        table.chunks_exact(s3).any(|sub| {
-            let (mut lo, mut hi, mut mag) = (0.0, 0.0, 0.0);
-            for (v, &(pl, ph)) in d.iter().zip(sub) {
-                if *v >= 0.0 {
-                    lo += v * pl;
-                    hi += v * ph;
-                } else {
-                    lo += v * ph;
-                    hi += v * pl;
-                }
-                mag += v.abs() * ph.abs().max(pl.abs());
-            }
-            let eps = 1e-12 * mag;
-            lo <= eps && hi > -eps
-        })
-    })
+    accc_sub_with_masks(field, lattice, iso, coarse, n, false).0
 }
 
-#[inline]
-fn interval_product(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> (f64, f64) {
-    let mut lo = f64::INFINITY;
-    let mut hi = f64::NEG_INFINITY;
-    for x in [a.0, a.1] {
-        for y in [b.0, b.1] {
-            for z in [c.0, c.1] {
-                let p = x * y * z;
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        }
+/// [`accc_sub`] and, with `keep_masks`, every kept cell's 4³ sub-cell mask
+/// ([`accc_sub::SubCellBounds::mask`]; `n` must divide 4) by linear cell
+/// index, ascending.
+pub fn accc_sub_with_masks<T: Coefficient>(
+    field: &Field<T>,
+    lattice: &Lattice,
+    iso: f64,
+    coarse: &Tags,
+    n: usize,
+    keep_masks: bool,
+) -> (Tags, masks::LinearMasks) {
+    let bounds = accc_sub::SubCellBounds::new(field.kernel(), n);
+    assert!(!keep_masks || bounds.has_masks(), "accc{n} has no 4³ masks");
+    let [nx, ny, nz] = lattice.cells;
+    let slab = nx * ny;
+    let slabs: Vec<(Vec<u8>, masks::LinearMasks)> = (0..nz)
+        .into_par_iter()
+        .map_init(
+            || bounds.scratch(),
+            |w, z| {
+                let mut flags = vec![0u8; slab];
+                let mut found = Vec::new();
+                let first = z * slab;
+                for i in (first..first + slab).filter(|&i| coarse.get_index(i)) {
+                    let cell = crate::lattice::cell_at(lattice.cells, i);
+                    let bits = bounds.straddling(field, cell, iso, w);
+                    if bits != 0 {
+                        flags[i - first] = 1;
+                        if keep_masks {
+                            found.push((i, bounds.mask(bits)));
+                        }
+                    }
+                }
+                (flags, found)
+            },
+        )
+        .collect();
+    let mut all = Vec::new();
+    let mut chunks = Vec::with_capacity(slabs.len());
+    for (flags, found) in slabs {
+        chunks.push(flags);
+        all.extend(found);
     }
-    (lo, hi)
+    (Tags::from_chunks(lattice.cells, chunks), all)
 }
 
 /// `c - iso` over a cell's `S³` support, x fastest.

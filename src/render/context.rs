@@ -51,7 +51,7 @@ pub struct Ctx<'a, T: Coefficient = f64> {
     pub entry_side: Option<bool>,
     pub basis: BernsteinBasis,
     pub skip: Skip<'a>,
-    /// Sub-cell masks of the tagged cells (Bézier classification).
+    /// Sub-cell masks of the tagged cells ([`crate::classify::Method::has_masks`]).
     pub masks: Option<&'a SubCellMasks>,
     /// Second-derivative bounds of the tagged cells (B-splines of degree ≥ 2),
     /// when `clear_crossing_cells` is on.

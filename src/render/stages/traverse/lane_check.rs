@@ -89,7 +89,7 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
                 panic!("{traversal} walks the octree");
             };
             assert!(W::fits(&ctx, tree), "{traversal} {method:?}");
-            assert_eq!(ctx.masks.is_some(), matches!(method, Method::Bezier(_)));
+            assert_eq!(ctx.masks.is_some(), method.has_masks());
             let cubes = budget.map(|b| Proximity::build_within(tree.tags(), b));
             if let Some(p) = &cubes {
                 assert_eq!(p.is_octant(), budget > Some(0));

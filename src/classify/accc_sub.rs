@@ -1,0 +1,381 @@
+//! ACCC per sub-cell: the refinement the paper proposes in section 4.2.4 and
+//! leaves untried.
+//!
+//! Equation (1) bounds `f - iso` over a cell by the per-axis weight maxima and
+//! minima over the whole cell. Over an `n`-th of the cell per axis the
+//! weights vary less, so their ranges, and the bound, are tighter: a cell
+//! stays tagged when one of its `n³` sub-cells' bounds straddles the
+//! iso-value. The per-axis weight ranges are multiplied as intervals, so the
+//! bound also holds for kernels with negative lobes.
+//!
+//! The sub-cells that straddle are kept as the cell's mask in the 4³ layout
+//! of [`crate::classify::SubCellMasks`] (a sub-cell of `n = 2` covers 2³ of
+//! them), so the traversal hands the solve stage only the segments that meet
+//! one, as it does for the Bézier classification's masks.
+
+use super::bezier::SUB;
+use crate::filter::Field;
+use crate::filter::coeffs::Coefficient;
+use crate::filter::kernel::Kernel;
+
+/// ACCC's bound per sub-cell for one kernel and `n` (at most 4, so a cell's
+/// sub-cells fit a `u64`).
+pub struct SubCellBounds {
+    n: usize,
+    s: usize,
+    how: How,
+}
+
+enum How {
+    /// Non-negative kernels: a product of weight ranges is the product of
+    /// their minima and of their maxima, so each bound is a tensor
+    /// contraction of `d = c - iso` with per-axis vectors, axis by axis —
+    /// `n·S³ + n²·S² + n³·S` multiply-adds where the sub-cells one by one
+    /// take `n³·S³`. `lo[a·S + j]`, `hi[a·S + j]`: weight `j`'s minimum
+    /// (clamped at 0) and maximum over sub-interval `a`.
+    Separable { lo: Vec<f64>, hi: Vec<f64> },
+    /// Kernels with negative lobes: the interval product of every support
+    /// term over every sub-cell, tabulated once (it does not depend on the
+    /// cell), at `sub · S³ + i + S·(j + S·k)`.
+    Table(Vec<(f64, f64)>),
+}
+
+/// Scratch for [`SubCellBounds`], one per thread.
+pub struct Scratch {
+    d: Vec<f64>,
+    /// The channels `max(d, 0)` and `min(d, 0)`.
+    pos: Vec<f64>,
+    neg: Vec<f64>,
+    z: Vec<f64>,
+    y: Vec<f64>,
+    /// Per sub-cell: `pos·hi³`, `pos·lo³`, `neg·hi³`, `neg·lo³`.
+    out: [Vec<f64>; 4],
+}
+
+impl SubCellBounds {
+    pub fn new(kernel: &Kernel, n: usize) -> SubCellBounds {
+        assert!((1..=4).contains(&n), "1 to 4 sub-cells per axis");
+        let s = kernel.support();
+        // ranges[a][j]: (lo, hi) of weight j over [a/n, (a+1)/n].
+        let ranges: Vec<Vec<(f64, f64)>> = (0..n)
+            .map(|a| {
+                (0..s)
+                    .map(|j| kernel.weight_range(j, a as f64 / n as f64, (a + 1) as f64 / n as f64))
+                    .collect()
+            })
+            .collect();
+        let how = if kernel.is_nonnegative() {
+            // The weights are never negative: a minimum below 0 is the
+            // range's widening against rounding, and 0 still bounds them.
+            let flat = |f: fn((f64, f64)) -> f64| ranges.iter().flatten().map(|&r| f(r)).collect();
+            How::Separable {
+                lo: flat(|r| r.0.max(0.0)),
+                hi: flat(|r| r.1),
+            }
+        } else {
+            let s3 = s * s * s;
+            let mut table = vec![(0.0, 0.0); n * n * n * s3];
+            for sub in 0..n * n * n {
+                let (ax, ay, az) = (sub % n, sub / n % n, sub / (n * n));
+                for k in 0..s {
+                    for j in 0..s {
+                        for i in 0..s {
+                            table[sub * s3 + i + s * (j + s * k)] =
+                                interval_product(ranges[ax][i], ranges[ay][j], ranges[az][k]);
+                        }
+                    }
+                }
+            }
+            How::Table(table)
+        };
+        SubCellBounds { n, s, how }
+    }
+
+    pub fn scratch(&self) -> Scratch {
+        let (n, s) = (self.n, self.s);
+        Scratch {
+            d: vec![0.0; s * s * s],
+            pos: vec![0.0; s * s * s],
+            neg: vec![0.0; s * s * s],
+            z: vec![0.0; n * s * s],
+            y: vec![0.0; n * n * s],
+            out: std::array::from_fn(|_| vec![0.0; n * n * n]),
+        }
+    }
+
+    /// The sub-cells (bit `ax + n·(ay + n·az)`) whose bound of `f - iso`
+    /// straddles zero, for `cell` of `field` at the (separated) iso-value
+    /// `iso`. The slack scales with the terms summed, so summation rounding
+    /// cannot untag a sub-cell whose bound is exactly at the iso-value.
+    pub fn straddling<T: Coefficient>(
+        &self,
+        field: &Field<T>,
+        cell: [i64; 3],
+        iso: f64,
+        w: &mut Scratch,
+    ) -> u64 {
+        super::support_minus_iso_into(field, cell, iso, &mut w.d);
+        let subs = self.n * self.n * self.n;
+        let mut bits = 0u64;
+        match &self.how {
+            How::Separable { lo, hi } => {
+                for (e, &v) in w.d.iter().enumerate() {
+                    w.pos[e] = v.max(0.0);
+                    w.neg[e] = v.min(0.0);
+                }
+                let [ph, pl, nh, nl] = &mut w.out;
+                let (z, y) = (&mut w.z, &mut w.y);
+                contract(self.n, self.s, &w.pos, hi, z, y, ph);
+                contract(self.n, self.s, &w.pos, lo, z, y, pl);
+                contract(self.n, self.s, &w.neg, hi, z, y, nh);
+                contract(self.n, self.s, &w.neg, lo, z, y, nl);
+                for sub in 0..subs {
+                    let (up, down) = (ph[sub] + nl[sub], pl[sub] + nh[sub]);
+                    // Σ |d|·max weight product.
+                    let eps = 1e-12 * (ph[sub] - nh[sub]);
+                    bits |= ((down <= eps && up > -eps) as u64) << sub;
+                }
+            }
+            How::Table(table) => {
+                let s3 = self.s * self.s * self.s;
+                for sub in 0..subs {
+                    let terms = &table[sub * s3..(sub + 1) * s3];
+                    let (mut lo, mut hi, mut mag) = (0.0, 0.0, 0.0);
+                    for (v, &(pl, ph)) in w.d.iter().zip(terms) {
+                        if *v >= 0.0 {
+                            lo += v * pl;
+                            hi += v * ph;
+                        } else {
+                            lo += v * ph;
+                            hi += v * pl;
+                        }
+                        mag += v.abs() * ph.abs().max(pl.abs());
+                    }
+                    let eps = 1e-12 * mag;
+                    bits |= ((lo <= eps && hi > -eps) as u64) << sub;
+                }
+            }
+        }
+        bits
+    }
+
+    /// Whether the straddling sub-cells can be kept as a 4³ mask ([`SUB`]
+    /// a multiple of `n`).
+    pub fn has_masks(&self) -> bool {
+        SUB.is_multiple_of(self.n)
+    }
+
+    /// [`SubCellBounds::straddling`]'s bits as a mask of the cell's 4³
+    /// sub-cells (bit `i + 4·(j + 4·k)`, x fastest): each straddling
+    /// sub-cell sets the `(4/n)³` it covers. Non-zero exactly when the cell
+    /// is tagged.
+    pub fn mask(&self, straddling: u64) -> u64 {
+        debug_assert!(self.has_masks());
+        let (n, f) = (self.n, SUB / self.n);
+        let mut mask = 0u64;
+        for sub in (0..n * n * n).filter(|&sub| straddling >> sub & 1 == 1) {
+            let (ax, ay, az) = (sub % n, sub / n % n, sub / (n * n));
+            for k in az * f..(az + 1) * f {
+                for j in ay * f..(ay + 1) * f {
+                    for i in ax * f..(ax + 1) * f {
+                        mask |= 1 << (i + SUB * (j + SUB * k));
+                    }
+                }
+            }
+        }
+        mask
+    }
+
+    /// The 4³ [`SubCellBounds::mask`] of `cell`.
+    pub fn cell_mask<T: Coefficient>(
+        &self,
+        field: &Field<T>,
+        cell: [i64; 3],
+        iso: f64,
+        w: &mut Scratch,
+    ) -> u64 {
+        self.mask(self.straddling(field, cell, iso, w))
+    }
+}
+
+/// `out[ax + n·(ay + n·az)] = Σ t[i + S·(j + S·k)]·w[ax·S + i]·w[ay·S + j]·w[az·S + k]`,
+/// one axis at a time (z, then y, then x), with `z` and `y` as scratch.
+fn contract(
+    n: usize,
+    s: usize,
+    t: &[f64],
+    w: &[f64],
+    z: &mut [f64],
+    y: &mut [f64],
+    out: &mut [f64],
+) {
+    // z[(az·S + j)·S + i]
+    for az in 0..n {
+        let wz = &w[az * s..][..s];
+        for j in 0..s {
+            for i in 0..s {
+                z[(az * s + j) * s + i] = (0..s).map(|k| t[i + s * (j + s * k)] * wz[k]).sum();
+            }
+        }
+    }
+    // y[(az·n + ay)·S + i]
+    for az in 0..n {
+        for ay in 0..n {
+            let wy = &w[ay * s..][..s];
+            for i in 0..s {
+                y[(az * n + ay) * s + i] = (0..s).map(|j| z[(az * s + j) * s + i] * wy[j]).sum();
+            }
+        }
+    }
+    for az in 0..n {
+        for ay in 0..n {
+            let row = &y[(az * n + ay) * s..][..s];
+            for ax in 0..n {
+                let wx = &w[ax * s..][..s];
+                out[ax + n * (ay + n * az)] = row.iter().zip(wx).map(|(a, b)| a * b).sum();
+            }
+        }
+    }
+}
+
+#[inline]
+fn interval_product(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> (f64, f64) {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for x in [a.0, a.1] {
+        for y in [b.0, b.1] {
+            for z in [c.0, c.1] {
+                let p = x * y * z;
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+    }
+    (lo, hi)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::classify::{Method, accc, accc_sub, accc_sub_with_masks, classify};
+    use crate::filter::FilterKind;
+    use crate::lattice::Lattice;
+
+    fn noisy(filter: &str) -> (Field<f64>, f64) {
+        let vol = crate::volume::scrambled_u8([10, 9, 11], 7);
+        let f = Field::new(&vol, FilterKind::parse(filter, 0.0).unwrap());
+        let iso = f.separating_iso(120.0);
+        (f, iso)
+    }
+
+    /// Every point of sub-cell `(i, j, k)` of 4³ sampled on a 5³ grid
+    /// (faces included): whether `f - iso` takes both signs there.
+    fn sign_change_in(
+        f: &Field<f64>,
+        lattice: &Lattice,
+        cell: [i64; 3],
+        sub: [usize; 3],
+        iso: f64,
+    ) -> bool {
+        let (mut pos, mut neg) = (false, false);
+        for k in 0..5 {
+            for j in 0..5 {
+                for i in 0..5 {
+                    let at = [i, j, k];
+                    let p: [f64; 3] = std::array::from_fn(|a| {
+                        cell[a] as f64 - lattice.offset
+                            + (sub[a] as f64 + at[a] as f64 / 4.0) / SUB as f64
+                    });
+                    let v = f.value(glam::DVec3::from_array(p)) - iso;
+                    pos |= v > 0.0;
+                    neg |= v <= 0.0;
+                }
+            }
+        }
+        pos && neg
+    }
+
+    #[test]
+    fn masks_hold_every_sub_cell_with_a_sign_change_and_match_the_tags() {
+        for filter in ["bspline3", "bspline2", "catmull-rom"] {
+            let (f, iso) = noisy(filter);
+            let lattice = Lattice::new(f.kernel(), f.dims());
+            let coarse = accc(&f, &lattice, iso);
+            for n in [2usize, 4] {
+                let (tags, masks) = accc_sub_with_masks(&f, &lattice, iso, &coarse, n, true);
+                // The same tags as without masks, one non-empty mask per tag.
+                assert_eq!(
+                    tags,
+                    accc_sub(&f, &lattice, iso, &coarse, n),
+                    "{filter} {n}"
+                );
+                assert_eq!(masks.len(), tags.count());
+                assert!(masks.windows(2).all(|w| w[0].0 < w[1].0), "ascending");
+                let mut checked = 0;
+                for &(i, mask) in &masks {
+                    assert_ne!(mask, 0);
+                    let cell = crate::lattice::cell_at(lattice.cells, i);
+                    for b in 0..64 {
+                        let sub = [b % SUB, b / SUB % SUB, b / (SUB * SUB)];
+                        if sign_change_in(&f, &lattice, cell, sub, iso) {
+                            checked += 1;
+                            assert!(
+                                mask >> b & 1 == 1,
+                                "{filter} accc{n}: cell {cell:?} sub {sub:?}"
+                            );
+                        }
+                    }
+                }
+                assert!(
+                    checked > 100,
+                    "{filter}: the test saw crossings ({checked})"
+                );
+            }
+        }
+    }
+
+    #[test]
+    fn halves_cover_their_quarters_and_tighten_the_whole_cell() {
+        // A smooth surface: noise keeps every sub-cell of a tagged cell.
+        let vol = crate::phantom::SphereSpec {
+            size: 24,
+            radius: 8.0,
+            sigma: 1.5,
+            ..Default::default()
+        }
+        .build()
+        .unwrap();
+        let f = Field::new(&vol, FilterKind::BSpline(3));
+        let iso = f.separating_iso(0.5);
+        let lattice = Lattice::new(f.kernel(), f.dims());
+        let coarse = accc(&f, &lattice, iso);
+        let halves = SubCellBounds::new(f.kernel(), 2);
+        let quarters = SubCellBounds::new(f.kernel(), 4);
+        let mut w = halves.scratch();
+        let mut w4 = quarters.scratch();
+        let (mut bits2, mut bits4) = (0, 0);
+        for i in (0..coarse.cells.iter().product()).filter(|&i| coarse.get_index(i)) {
+            let cell = crate::lattice::cell_at(lattice.cells, i);
+            let (m2, m4) = (
+                halves.cell_mask(&f, cell, iso, &mut w),
+                quarters.cell_mask(&f, cell, iso, &mut w4),
+            );
+            // A half's bits come in whole 2³ blocks of quarters.
+            for b in 0..64 {
+                let base = (b % 4 / 2 * 2) + 4 * (b / 4 % 4 / 2 * 2) + 16 * (b / 16 / 2 * 2);
+                let block = [0, 1, 4, 5, 16, 17, 20, 21].map(|o| m2 >> (base + o) & 1);
+                assert!(block.iter().all(|&v| v == block[0]), "{cell:?}");
+            }
+            assert_eq!(
+                m2.count_ones(),
+                8 * halves.straddling(&f, cell, iso, &mut w).count_ones()
+            );
+            (bits2, bits4) = (bits2 + m2.count_ones(), bits4 + m4.count_ones());
+        }
+        // Finer sub-cells keep fewer of the cell's volume.
+        assert!(bits4 < bits2, "{bits4} < {bits2}");
+        // And the methods' tags are the masks' cells.
+        let t4 = classify(&f, iso, Method::AcccSub(4)).tags;
+        assert!(t4.count() > 0 && t4.is_subset_of(&coarse));
+    }
+}
