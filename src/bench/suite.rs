@@ -585,7 +585,7 @@ fn paper_tables() -> Vec<Table> {
         "Ray casting with step 0.1 against the DDA and the octree over BMCC and ACCC tags \
 (the paper's columns; it also applied PRSS, which costs little), plus the octree over ACCC \
 per 4³ sub-cells (the refinement the paper proposes, with the sub-cells kept as masks the \
-walk tests each segment against), over Bézier-hull tags and the distance field's cubes reaching ahead of the ray over the same tags. Error: the sphere against its analytic spheres, the CT scenes against a \
+walk tests each segment against), over Bézier-hull tags, and the distance field's cubes reaching ahead of the ray over the Bézier-hull tags. Error: the sphere against its analytic spheres, the CT scenes against a \
 dense march (step 0.02, tolerance 1e-9) through the same field.",
         Comparison::Speedup,
         false,
