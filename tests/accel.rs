@@ -50,6 +50,7 @@ fn conservative_on_phantoms() {
         Method::Accc,
         Method::AcccSub(2),
         Method::AcccSub(4),
+        Method::AcccSub(8),
         Method::Bezier(0),
         Method::Bezier(2),
     ];

@@ -10,7 +10,7 @@
 //!
 //! The sub-cells that straddle are kept as the cell's mask in the 4³ layout
 //! of [`crate::classify::SubCellMasks`] (a sub-cell of `n = 2` covers 2³ of
-//! them), so the traversal hands the solve stage only the segments that meet
+//! them, one of `n = 8` lies in one), so the traversal hands the solve stage only the segments that meet
 //! one, as it does for the Bézier classification's masks.
 
 use super::bezier::SUB;
@@ -18,12 +18,16 @@ use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 use crate::filter::kernel::Kernel;
 
-/// ACCC's bound per sub-cell for one kernel and `n` (at most 4, so a cell's
-/// sub-cells fit a `u64`).
+/// Most sub-cells per axis.
+pub const MAX_SUB: usize = 8;
+
+/// ACCC's bound per sub-cell for one kernel and `n` sub-cells per axis.
 pub struct SubCellBounds {
     n: usize,
     s: usize,
     how: How,
+    /// Per sub-cell, the bits of the 4³ mask it sets ([`coverage`]).
+    covers: Vec<u64>,
 }
 
 enum How {
@@ -54,7 +58,10 @@ pub struct Scratch {
 
 impl SubCellBounds {
     pub fn new(kernel: &Kernel, n: usize) -> SubCellBounds {
-        assert!((1..=4).contains(&n), "1 to 4 sub-cells per axis");
+        assert!(
+            (1..=MAX_SUB).contains(&n),
+            "1 to {MAX_SUB} sub-cells per axis"
+        );
         let s = kernel.support();
         // ranges[a][j]: (lo, hi) of weight j over [a/n, (a+1)/n].
         let ranges: Vec<Vec<(f64, f64)>> = (0..n)
@@ -88,7 +95,12 @@ impl SubCellBounds {
             }
             How::Table(table)
         };
-        SubCellBounds { n, s, how }
+        SubCellBounds {
+            n,
+            s,
+            how,
+            covers: coverage(n),
+        }
     }
 
     pub fn scratch(&self) -> Scratch {
@@ -103,11 +115,15 @@ impl SubCellBounds {
         }
     }
 
-    /// The sub-cells (bit `ax + n·(ay + n·az)`) whose bound of `f - iso`
-    /// straddles zero, for `cell` of `field` at the (separated) iso-value
-    /// `iso`. The slack scales with the terms summed, so summation rounding
-    /// cannot untag a sub-cell whose bound is exactly at the iso-value.
-    pub fn straddling<T: Coefficient>(
+    /// The cell's 4³ mask (bit `i + 4·(j + 4·k)`, x fastest) of the
+    /// sub-cells that meet one of ours whose bound of `f - iso` straddles
+    /// zero, for `cell` of `field` at the (separated) iso-value `iso`: a
+    /// straddling half of `accc2` sets the 2³ quarters it covers, an eighth
+    /// of `accc8` the quarter it lies in. Non-zero exactly when the cell is
+    /// tagged. The slack scales with the terms summed, so summation
+    /// rounding cannot untag a sub-cell whose bound is exactly at the
+    /// iso-value.
+    pub fn cell_mask<T: Coefficient>(
         &self,
         field: &Field<T>,
         cell: [i64; 3],
@@ -116,7 +132,7 @@ impl SubCellBounds {
     ) -> u64 {
         super::support_minus_iso_into(field, cell, iso, &mut w.d);
         let subs = self.n * self.n * self.n;
-        let mut bits = 0u64;
+        let mut mask = 0u64;
         match &self.how {
             How::Separable { lo, hi } => {
                 for (e, &v) in w.d.iter().enumerate() {
@@ -133,7 +149,9 @@ impl SubCellBounds {
                     let (up, down) = (ph[sub] + nl[sub], pl[sub] + nh[sub]);
                     // Σ |d|·max weight product.
                     let eps = 1e-12 * (ph[sub] - nh[sub]);
-                    bits |= ((down <= eps && up > -eps) as u64) << sub;
+                    if down <= eps && up > -eps {
+                        mask |= self.covers[sub];
+                    }
                 }
             }
             How::Table(table) => {
@@ -152,50 +170,35 @@ impl SubCellBounds {
                         mag += v.abs() * ph.abs().max(pl.abs());
                     }
                     let eps = 1e-12 * mag;
-                    bits |= ((lo <= eps && hi > -eps) as u64) << sub;
-                }
-            }
-        }
-        bits
-    }
-
-    /// Whether the straddling sub-cells can be kept as a 4³ mask ([`SUB`]
-    /// a multiple of `n`).
-    pub fn has_masks(&self) -> bool {
-        SUB.is_multiple_of(self.n)
-    }
-
-    /// [`SubCellBounds::straddling`]'s bits as a mask of the cell's 4³
-    /// sub-cells (bit `i + 4·(j + 4·k)`, x fastest): each straddling
-    /// sub-cell sets the `(4/n)³` it covers. Non-zero exactly when the cell
-    /// is tagged.
-    pub fn mask(&self, straddling: u64) -> u64 {
-        debug_assert!(self.has_masks());
-        let (n, f) = (self.n, SUB / self.n);
-        let mut mask = 0u64;
-        for sub in (0..n * n * n).filter(|&sub| straddling >> sub & 1 == 1) {
-            let (ax, ay, az) = (sub % n, sub / n % n, sub / (n * n));
-            for k in az * f..(az + 1) * f {
-                for j in ay * f..(ay + 1) * f {
-                    for i in ax * f..(ax + 1) * f {
-                        mask |= 1 << (i + SUB * (j + SUB * k));
+                    if lo <= eps && hi > -eps {
+                        mask |= self.covers[sub];
                     }
                 }
             }
         }
         mask
     }
+}
 
-    /// The 4³ [`SubCellBounds::mask`] of `cell`.
-    pub fn cell_mask<T: Coefficient>(
-        &self,
-        field: &Field<T>,
-        cell: [i64; 3],
-        iso: f64,
-        w: &mut Scratch,
-    ) -> u64 {
-        self.mask(self.straddling(field, cell, iso, w))
-    }
+/// Per sub-cell of `n³` (x fastest), the 4³ sub-cells it overlaps: along an
+/// axis, sub-cell `a` spans `[a/n, (a+1)/n]`, which meets quarters
+/// `⌊4a/n⌋ ..= ⌈4(a+1)/n⌉ − 1`.
+fn coverage(n: usize) -> Vec<u64> {
+    let span = |a: usize| (a * SUB / n)..(((a + 1) * SUB).div_ceil(n));
+    (0..n * n * n)
+        .map(|sub| {
+            let (ax, ay, az) = (sub % n, sub / n % n, sub / (n * n));
+            let mut m = 0u64;
+            for k in span(az) {
+                for j in span(ay) {
+                    for i in span(ax) {
+                        m |= 1 << (i + SUB * (j + SUB * k));
+                    }
+                }
+            }
+            m
+        })
+        .collect()
 }
 
 /// `out[ax + n·(ay + n·az)] = Σ t[i + S·(j + S·k)]·w[ax·S + i]·w[ay·S + j]·w[az·S + k]`,
@@ -301,7 +304,7 @@ mod tests {
             let (f, iso) = noisy(filter);
             let lattice = Lattice::new(f.kernel(), f.dims());
             let coarse = accc(&f, &lattice, iso);
-            for n in [2usize, 4] {
+            for n in [2usize, 4, 8] {
                 let (tags, masks) = accc_sub_with_masks(&f, &lattice, iso, &coarse, n, true);
                 // The same tags as without masks, one non-empty mask per tag.
                 assert_eq!(
@@ -366,10 +369,6 @@ mod tests {
                 let block = [0, 1, 4, 5, 16, 17, 20, 21].map(|o| m2 >> (base + o) & 1);
                 assert!(block.iter().all(|&v| v == block[0]), "{cell:?}");
             }
-            assert_eq!(
-                m2.count_ones(),
-                8 * halves.straddling(&f, cell, iso, &mut w).count_ones()
-            );
             (bits2, bits4) = (bits2 + m2.count_ones(), bits4 + m4.count_ones());
         }
         // Finer sub-cells keep fewer of the cell's volume.

@@ -47,7 +47,7 @@ use crate::lattice::Lattice;
 pub enum Method {
     Bmcc,
     Accc,
-    /// ACCC evaluated per `n³` sub-cells (n = 2 or 4).
+    /// ACCC evaluated per `n³` sub-cells (n = 2, 4 or 8).
     AcccSub(u8),
     /// Bézier hull with up to `depth` de Casteljau subdivisions.
     Bezier(u8),
@@ -71,6 +71,7 @@ impl Method {
             "accc" => Method::Accc,
             "accc2" => Method::AcccSub(2),
             "accc4" => Method::AcccSub(4),
+            "accc8" => Method::AcccSub(8),
             "bezier" => Method::Bezier(2),
             "bezier0" => Method::Bezier(0),
             "bezier1" => Method::Bezier(1),
@@ -100,22 +101,23 @@ impl Method {
     /// Whether the method also tells which of a tagged cell's 4³ sub-cells
     /// can hold the surface ([`SubCellMasks`]), for the traversal to skip
     /// the segments that meet none: the Bézier hull's, and ACCC's per
-    /// sub-cell when its sub-cells tile the 4³ ones.
+    /// sub-cell (each of its sub-cells sets the 4³ ones it overlaps).
     pub fn has_masks(&self) -> bool {
         match *self {
             Method::Bezier(_) => true,
-            Method::AcccSub(n) => (1..=4).contains(&n) && bezier::SUB.is_multiple_of(n as usize),
+            Method::AcccSub(n) => (1..=accc_sub::MAX_SUB).contains(&(n as usize)),
             _ => false,
         }
     }
 
     /// The methods `snell classify` reports, coarse to fine.
-    pub fn all() -> [Method; 7] {
+    pub fn all() -> [Method; 8] {
         [
             Method::Bmcc,
             Method::Accc,
             Method::AcccSub(2),
             Method::AcccSub(4),
+            Method::AcccSub(8),
             Method::Bezier(0),
             Method::Bezier(2),
             Method::Exact,
@@ -160,7 +162,7 @@ pub fn classify<T: Coefficient>(field: &Field<T>, iso: f64, method: Method) -> C
 }
 
 /// [`classify`], and for the methods with sub-cell masks
-/// ([`Method::has_masks`]; `Method::Bezier(2)` and `accc2`/`accc4`) the
+/// ([`Method::has_masks`]; `Method::Bezier(2)` and `accc2`/`accc4`/`accc8`) the
 /// masks of the tagged cells found on the way ([`bezier::refine_with_masks`],
 /// [`accc_sub_with_masks`]; the same tags), by linear cell index, when they
 /// may fit `mask_budget` bytes (checked against the candidate cells, which
@@ -340,8 +342,8 @@ pub fn accc_sub<T: Coefficient>(
 }
 
 /// [`accc_sub`] and, with `keep_masks`, every kept cell's 4³ sub-cell mask
-/// ([`accc_sub::SubCellBounds::mask`]; `n` must divide 4) by linear cell
-/// index, ascending.
+/// ([`accc_sub::SubCellBounds::cell_mask`]) by linear cell index,
+/// ascending.
 pub fn accc_sub_with_masks<T: Coefficient>(
     field: &Field<T>,
     lattice: &Lattice,
@@ -351,7 +353,6 @@ pub fn accc_sub_with_masks<T: Coefficient>(
     keep_masks: bool,
 ) -> (Tags, masks::LinearMasks) {
     let bounds = accc_sub::SubCellBounds::new(field.kernel(), n);
-    assert!(!keep_masks || bounds.has_masks(), "accc{n} has no 4³ masks");
     let [nx, ny, nz] = lattice.cells;
     let slab = nx * ny;
     let slabs: Vec<(Vec<u8>, masks::LinearMasks)> = (0..nz)
@@ -364,11 +365,11 @@ pub fn accc_sub_with_masks<T: Coefficient>(
                 let first = z * slab;
                 for i in (first..first + slab).filter(|&i| coarse.get_index(i)) {
                     let cell = crate::lattice::cell_at(lattice.cells, i);
-                    let bits = bounds.straddling(field, cell, iso, w);
-                    if bits != 0 {
+                    let mask = bounds.cell_mask(field, cell, iso, w);
+                    if mask != 0 {
                         flags[i - first] = 1;
                         if keep_masks {
-                            found.push((i, bounds.mask(bits)));
+                            found.push((i, mask));
                         }
                     }
                 }
@@ -477,11 +478,12 @@ mod tests {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             let iso = f.separating_iso(120.0);
             let get = |m| classify(&f, iso, m).tags;
-            let (b, a, a2, a4, z0, z2, ex) = (
+            let (b, a, a2, a4, a8, z0, z2, ex) = (
                 get(Method::Bmcc),
                 get(Method::Accc),
                 get(Method::AcccSub(2)),
                 get(Method::AcccSub(4)),
+                get(Method::AcccSub(8)),
                 get(Method::Bezier(0)),
                 get(Method::Bezier(2)),
                 get(Method::Exact),
@@ -491,6 +493,7 @@ mod tests {
                 ("accc", &a),
                 ("accc2", &a2),
                 ("accc4", &a4),
+                ("accc8", &a8),
                 ("bezier0", &z0),
                 ("bezier", &z2),
             ] {
@@ -500,7 +503,7 @@ mod tests {
                 assert!(a.is_subset_of(&b), "{name}: accc ⊄ bmcc");
             }
             assert!(
-                a2.is_subset_of(&a) && a4.is_subset_of(&a2),
+                a2.is_subset_of(&a) && a4.is_subset_of(&a2) && a8.is_subset_of(&a4),
                 "{name}: sub-cells refine"
             );
             assert!(z2.is_subset_of(&z0), "{name}: subdivision refines");

@@ -341,7 +341,7 @@ struct RenderCfg {
     /// Tile side in pixels; unset means [`default_tile`].
     #[serde(default)]
     tile: Option<u32>,
-    /// `none`, `bmcc`, `accc`, `accc2`, `accc4`, `bezier` (see `classify`);
+    /// `none`, `bmcc`, `accc`, `accc2`, `accc4`, `accc8`, `bezier` (see `classify`);
     /// unset means [`DEFAULT_CLASSIFY`] for cell traversals.
     #[serde(default)]
     classify: Option<String>,
@@ -1004,7 +1004,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
                 return Err(bad(
                     "render.classify",
                     format!(
-                        "unknown or non-conservative method '{name}' (none, bmcc, accc, accc2, accc4, bezier)"
+                        "unknown or non-conservative method '{name}' (none, bmcc, accc, accc2, accc4, accc8, bezier)"
                     ),
                 ));
             }
