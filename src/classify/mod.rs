@@ -9,7 +9,7 @@
 //! |---|---|---|
 //! | `bmcc` | coefficients of the support on both sides of the iso-value (Thévenaz & Unser 2003) | separable OR windows |
 //! | `accc` | the paper's eq. (1): per-coefficient max/min weights over the cell | separable dot products |
-//! | `accc2`, `accc4` | eq. (1) per 2³ / 4³ sub-cell (the paper's proposed refinement) | per tagged cell |
+//! | `accc2`, `accc4`, `accc8` | eq. (1) per 2³ / 4³ / 8³ sub-cell (the paper's proposed refinement), the straddling sub-cells kept as a 4³ mask | per tagged cell, separable for non-negative kernels |
 //! | `bezier` | convex hull of the cell's tensor Bernstein (Bézier) coefficients, refined by de Casteljau subdivision | per tagged cell |
 //! | `exact` | crossings proven by sign changes between evaluated points (subdivision to 1/16 cell) | per tagged cell, measuring only |
 //!
