@@ -10,8 +10,9 @@
 //!
 //! The sub-cells that straddle are kept as the cell's mask in the 4³ layout
 //! of [`crate::classify::SubCellMasks`] (a sub-cell of `n = 2` covers 2³ of
-//! them, one of `n = 8` lies in one), so the traversal hands the solve stage only the segments that meet
-//! one, as it does for the Bézier classification's masks.
+//! them, one of `n = 8` lies in one), so the traversal hands the solve stage
+//! only the segments that meet one, as it does for the Bézier
+//! classification's masks.
 
 use super::bezier::SUB;
 use crate::filter::Field;
