@@ -36,9 +36,12 @@ enum How {
     /// their minima and of their maxima, so each bound is a tensor
     /// contraction of `d = c - iso` with per-axis vectors, axis by axis —
     /// `n·S³ + n²·S² + n³·S` multiply-adds where the sub-cells one by one
-    /// take `n³·S³`. `lo[a·S + j]`, `hi[a·S + j]`: weight `j`'s minimum
-    /// (clamped at 0) and maximum over sub-interval `a`.
-    Separable { lo: Vec<f64>, hi: Vec<f64> },
+    /// take `n³·S³`. The four bounds' contractions run together as the
+    /// lanes of `[f64; 4]` (the channels `pos·hi³`, `pos·lo³`, `neg·hi³`,
+    /// `neg·lo³`, see [`Scratch`]), so each pass is one vector operation
+    /// where four scalar ones were. `w[a·S + j]`: weight `j`'s maximum and
+    /// minimum (clamped at 0) over sub-interval `a`, as `[hi, lo, hi, lo]`.
+    Separable { w: Vec<[f64; 4]> },
     /// Kernels with negative lobes: the interval product of every support
     /// term over every sub-cell, tabulated once (it does not depend on the
     /// cell), at `sub · S³ + i + S·(j + S·k)`.
@@ -48,13 +51,13 @@ enum How {
 /// Scratch for [`SubCellBounds`], one per thread.
 pub struct Scratch {
     d: Vec<f64>,
-    /// The channels `max(d, 0)` and `min(d, 0)`.
-    pos: Vec<f64>,
-    neg: Vec<f64>,
-    z: Vec<f64>,
-    y: Vec<f64>,
+    /// `[pos, pos, neg, neg]` per support term, `pos = max(d, 0)` and
+    /// `neg = min(d, 0)`.
+    t: Vec<[f64; 4]>,
+    z: Vec<[f64; 4]>,
+    y: Vec<[f64; 4]>,
     /// Per sub-cell: `pos·hi³`, `pos·lo³`, `neg·hi³`, `neg·lo³`.
-    out: [Vec<f64>; 4],
+    out: Vec<[f64; 4]>,
 }
 
 impl SubCellBounds {
@@ -75,10 +78,15 @@ impl SubCellBounds {
         let how = if kernel.is_nonnegative() {
             // The weights are never negative: a minimum below 0 is the
             // range's widening against rounding, and 0 still bounds them.
-            let flat = |f: fn((f64, f64)) -> f64| ranges.iter().flatten().map(|&r| f(r)).collect();
             How::Separable {
-                lo: flat(|r| r.0.max(0.0)),
-                hi: flat(|r| r.1),
+                w: ranges
+                    .iter()
+                    .flatten()
+                    .map(|&(lo, hi)| {
+                        let lo = lo.max(0.0);
+                        [hi, lo, hi, lo]
+                    })
+                    .collect(),
             }
         } else {
             let s3 = s * s * s;
@@ -108,11 +116,10 @@ impl SubCellBounds {
         let (n, s) = (self.n, self.s);
         Scratch {
             d: vec![0.0; s * s * s],
-            pos: vec![0.0; s * s * s],
-            neg: vec![0.0; s * s * s],
-            z: vec![0.0; n * s * s],
-            y: vec![0.0; n * n * s],
-            out: std::array::from_fn(|_| vec![0.0; n * n * n]),
+            t: vec![[0.0; 4]; s * s * s],
+            z: vec![[0.0; 4]; n * s * s],
+            y: vec![[0.0; 4]; n * n * s],
+            out: vec![[0.0; 4]; n * n * n],
         }
     }
 
@@ -123,7 +130,10 @@ impl SubCellBounds {
     /// of `accc8` the quarter it lies in. Non-zero exactly when the cell is
     /// tagged. The slack scales with the terms summed, so summation
     /// rounding cannot untag a sub-cell whose bound is exactly at the
-    /// iso-value.
+    /// iso-value. Inlined, so that callers under [`crate::with_isa!`]
+    /// compile its lanes for the running instruction set (the same
+    /// operations, so the same bits).
+    #[inline(always)]
     pub fn cell_mask<T: Coefficient>(
         &self,
         field: &Field<T>,
@@ -135,21 +145,18 @@ impl SubCellBounds {
         let subs = self.n * self.n * self.n;
         let mut mask = 0u64;
         match &self.how {
-            How::Separable { lo, hi } => {
-                for (e, &v) in w.d.iter().enumerate() {
-                    w.pos[e] = v.max(0.0);
-                    w.neg[e] = v.min(0.0);
+            How::Separable { w: weights } => {
+                for (t, &v) in w.t.iter_mut().zip(&w.d) {
+                    let (pos, neg) = (v.max(0.0), v.min(0.0));
+                    *t = [pos, pos, neg, neg];
                 }
-                let [ph, pl, nh, nl] = &mut w.out;
-                let (z, y) = (&mut w.z, &mut w.y);
-                contract(self.n, self.s, &w.pos, hi, z, y, ph);
-                contract(self.n, self.s, &w.pos, lo, z, y, pl);
-                contract(self.n, self.s, &w.neg, hi, z, y, nh);
-                contract(self.n, self.s, &w.neg, lo, z, y, nl);
-                for sub in 0..subs {
-                    let (up, down) = (ph[sub] + nl[sub], pl[sub] + nh[sub]);
+                contract(
+                    self.n, self.s, &w.t, weights, &mut w.z, &mut w.y, &mut w.out,
+                );
+                for (sub, &[ph, pl, nh, nl]) in w.out.iter().enumerate() {
+                    let (up, down) = (ph + nl, pl + nh);
                     // Σ |d|·max weight product.
-                    let eps = 1e-12 * (ph[sub] - nh[sub]);
+                    let eps = 1e-12 * (ph - nh);
                     if down <= eps && up > -eps {
                         mask |= self.covers[sub];
                     }
@@ -202,23 +209,35 @@ fn coverage(n: usize) -> Vec<u64> {
         .collect()
 }
 
-/// `out[ax + n·(ay + n·az)] = Σ t[i + S·(j + S·k)]·w[ax·S + i]·w[ay·S + j]·w[az·S + k]`,
-/// one axis at a time (z, then y, then x), with `z` and `y` as scratch.
+/// `out[ax + n·(ay + n·az)] = Σ t[i + S·(j + S·k)]·w[ax·S + i]·w[ay·S + j]·w[az·S + k]`
+/// lane by lane, one axis at a time (z, then y, then x), with `z` and `y`
+/// as scratch.
+#[inline(always)]
 fn contract(
     n: usize,
     s: usize,
-    t: &[f64],
-    w: &[f64],
-    z: &mut [f64],
-    y: &mut [f64],
-    out: &mut [f64],
+    t: &[[f64; 4]],
+    w: &[[f64; 4]],
+    z: &mut [[f64; 4]],
+    y: &mut [[f64; 4]],
+    out: &mut [[f64; 4]],
 ) {
+    #[inline(always)]
+    fn dot(terms: impl Iterator<Item = ([f64; 4], [f64; 4])>) -> [f64; 4] {
+        let mut acc = [0.0; 4];
+        for (a, b) in terms {
+            for l in 0..4 {
+                acc[l] += a[l] * b[l];
+            }
+        }
+        acc
+    }
     // z[(az·S + j)·S + i]
     for az in 0..n {
         let wz = &w[az * s..][..s];
         for j in 0..s {
             for i in 0..s {
-                z[(az * s + j) * s + i] = (0..s).map(|k| t[i + s * (j + s * k)] * wz[k]).sum();
+                z[(az * s + j) * s + i] = dot((0..s).map(|k| (t[i + s * (j + s * k)], wz[k])));
             }
         }
     }
@@ -227,7 +246,7 @@ fn contract(
         for ay in 0..n {
             let wy = &w[ay * s..][..s];
             for i in 0..s {
-                y[(az * n + ay) * s + i] = (0..s).map(|j| z[(az * s + j) * s + i] * wy[j]).sum();
+                y[(az * n + ay) * s + i] = dot((0..s).map(|j| (z[(az * s + j) * s + i], wy[j])));
             }
         }
     }
@@ -236,7 +255,7 @@ fn contract(
             let row = &y[(az * n + ay) * s..][..s];
             for ax in 0..n {
                 let wx = &w[ax * s..][..s];
-                out[ax + n * (ay + n * az)] = row.iter().zip(wx).map(|(a, b)| a * b).sum();
+                out[ax + n * (ay + n * az)] = dot(row.iter().copied().zip(wx.iter().copied()));
             }
         }
     }

@@ -62,7 +62,11 @@ impl SubCellMasks {
         let bounds = SubCellBounds::new(field.kernel(), n);
         let masks = index.table_init(
             || bounds.scratch(),
-            |w, cell| bounds.cell_mask(field, cell, iso, w),
+            |w, cell| {
+                crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
+                    bounds.cell_mask(field, cell, iso, w)
+                })
+            },
         );
         SubCellMasks { index, masks }
     }

@@ -363,16 +363,18 @@ pub fn accc_sub_with_masks<T: Coefficient>(
                 let mut flags = vec![0u8; slab];
                 let mut found = Vec::new();
                 let first = z * slab;
-                for i in (first..first + slab).filter(|&i| coarse.get_index(i)) {
-                    let cell = crate::lattice::cell_at(lattice.cells, i);
-                    let mask = bounds.cell_mask(field, cell, iso, w);
-                    if mask != 0 {
-                        flags[i - first] = 1;
-                        if keep_masks {
-                            found.push((i, mask));
+                crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
+                    for i in (first..first + slab).filter(|&i| coarse.get_index(i)) {
+                        let cell = crate::lattice::cell_at(lattice.cells, i);
+                        let mask = bounds.cell_mask(field, cell, iso, w);
+                        if mask != 0 {
+                            flags[i - first] = 1;
+                            if keep_masks {
+                                found.push((i, mask));
+                            }
                         }
                     }
-                }
+                });
                 (flags, found)
             },
         )
