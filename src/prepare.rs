@@ -105,7 +105,7 @@ impl Accel {
 
     /// Sub-cell masks of the tagged cells, built on first use for the
     /// methods that have them ([`Method::has_masks`]: the Bézier hull, and
-    /// ACCC per 2³ or 4³ sub-cells; the paper's BMCC and ACCC are measured at
+    /// ACCC per 2³, 4³ or 8³ sub-cells; the paper's BMCC and ACCC are measured at
     /// their own resolution) when they fit [`TABLE_BUDGET`]: filed from those
     /// the classification found, or computed when the tags came from the
     /// disk cache; returns them (or `None`) and the build time.

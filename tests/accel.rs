@@ -182,11 +182,12 @@ fn size_of(s: &Scene) -> Vec<String> {
     ]
 }
 
-const VARIANTS: [&[&str]; 7] = [
+const VARIANTS: [&[&str]; 8] = [
     &["render.traversal=dda", "render.classify=bmcc"],
     &["render.traversal=dda", "render.classify=accc"],
     &["render.traversal=octree", "render.classify=accc"],
     &["render.traversal=octree", "render.classify=accc4"],
+    &["render.traversal=octree", "render.classify=accc8"],
     &[
         "render.traversal=octree",
         "render.classify=bezier",

@@ -393,7 +393,7 @@ mod tests {
         }
         // Finer sub-cells keep fewer of the cell's volume.
         assert!(bits4 < bits2, "{bits4} < {bits2}");
-        // And the methods' tags are the masks' cells.
+        // The method tags some cells, all among the coarse ones.
         let t4 = classify(&f, iso, Method::AcccSub(4)).tags;
         assert!(t4.count() > 0 && t4.is_subset_of(&coarse));
     }

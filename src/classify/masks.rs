@@ -36,7 +36,7 @@ impl SubCellMasks {
         count * 8
     }
 
-    /// Masks of every tagged cell of `index` for the (separated) iso-value
+    /// Masks of every tagged cell of `index` by the Bézier hull, for the (separated) iso-value
     /// `iso`.
     pub fn build<T: Coefficient>(
         field: &Field<T>,
