@@ -15,6 +15,7 @@
 //! classification's masks.
 
 use super::bezier::SUB;
+use super::bound::interval_product;
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 use crate::filter::kernel::Kernel;
@@ -259,22 +260,6 @@ fn contract(
             }
         }
     }
-}
-
-#[inline]
-fn interval_product(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> (f64, f64) {
-    let mut lo = f64::INFINITY;
-    let mut hi = f64::NEG_INFINITY;
-    for x in [a.0, a.1] {
-        for y in [b.0, b.1] {
-            for z in [c.0, c.1] {
-                let p = x * y * z;
-                lo = lo.min(p);
-                hi = hi.max(p);
-            }
-        }
-    }
-    (lo, hi)
 }
 
 #[cfg(test)]

@@ -572,13 +572,7 @@ fn refine_with_masks_on<T: Coefficient>(
             },
         )
         .collect();
-    let mut all = Vec::new();
-    let mut chunks = Vec::with_capacity(slabs.len());
-    for (flags, masks) in slabs {
-        chunks.push(flags);
-        all.extend(masks);
-    }
-    (Tags::from_chunks(lattice.cells, chunks), all)
+    super::masks::join_slabs(lattice.cells, slabs)
 }
 
 #[cfg(test)]

@@ -38,18 +38,7 @@ impl CellBound {
         for k in 0..s {
             for j in 0..s {
                 for i in 0..s {
-                    let (a, b, c) = (ranges[i], ranges[j], ranges[k]);
-                    let mut mn = f64::INFINITY;
-                    let mut mx = f64::NEG_INFINITY;
-                    for x in [a.0, a.1] {
-                        for y in [b.0, b.1] {
-                            for z in [c.0, c.1] {
-                                let p = x * y * z;
-                                mn = mn.min(p);
-                                mx = mx.max(p);
-                            }
-                        }
-                    }
+                    let (mn, mx) = interval_product(ranges[i], ranges[j], ranges[k]);
                     lo[i + s * (j + s * k)] = mn;
                     hi[i + s * (j + s * k)] = mx;
                 }
@@ -127,6 +116,24 @@ impl CellBound {
         let (lo, hi) = self.range(field, cell, iso);
         lo <= iso && iso <= hi
     }
+}
+
+/// The range of `x·y·z` over the box of intervals `a × b × c` (any signs):
+/// the least and largest product of their ends.
+#[inline]
+pub(crate) fn interval_product(a: (f64, f64), b: (f64, f64), c: (f64, f64)) -> (f64, f64) {
+    let mut lo = f64::INFINITY;
+    let mut hi = f64::NEG_INFINITY;
+    for x in [a.0, a.1] {
+        for y in [b.0, b.1] {
+            for z in [c.0, c.1] {
+                let p = x * y * z;
+                lo = lo.min(p);
+                hi = hi.max(p);
+            }
+        }
+    }
+    (lo, hi)
 }
 
 #[cfg(test)]

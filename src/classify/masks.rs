@@ -11,6 +11,7 @@ use super::accc_sub::SubCellBounds;
 use super::bezier::SubCells;
 use super::slack;
 use super::tagged::TaggedIndex;
+use super::tags::Tags;
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 
@@ -19,6 +20,22 @@ use crate::filter::coeffs::Coefficient;
 /// [`crate::classify::accc_sub_with_masks`]) before the tagged cells have
 /// slots.
 pub type LinearMasks = Vec<(usize, u64)>;
+
+/// The tags and masks of a classification that decided the lattice `cells`
+/// one z slab at a time (each slab's flags, and its masks in ascending
+/// order), joined in slab order.
+pub(crate) fn join_slabs(
+    cells: [usize; 3],
+    slabs: Vec<(Vec<u8>, LinearMasks)>,
+) -> (Tags, LinearMasks) {
+    let mut all = Vec::new();
+    let mut chunks = Vec::with_capacity(slabs.len());
+    for (flags, masks) in slabs {
+        chunks.push(flags);
+        all.extend(masks);
+    }
+    (Tags::from_chunks(cells, chunks), all)
+}
 
 /// Sub-cell masks of the tagged cells of one classification.
 #[derive(Clone, Debug)]

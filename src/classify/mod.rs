@@ -379,13 +379,7 @@ pub fn accc_sub_with_masks<T: Coefficient>(
             },
         )
         .collect();
-    let mut all = Vec::new();
-    let mut chunks = Vec::with_capacity(slabs.len());
-    for (flags, found) in slabs {
-        chunks.push(flags);
-        all.extend(found);
-    }
-    (Tags::from_chunks(lattice.cells, chunks), all)
+    masks::join_slabs(lattice.cells, slabs)
 }
 
 /// `c - iso` over a cell's `S³` support, x fastest.
