@@ -143,7 +143,6 @@ impl SubCellBounds {
         w: &mut Scratch,
     ) -> u64 {
         super::support_minus_iso_into(field, cell, iso, &mut w.d);
-        let subs = self.n * self.n * self.n;
         let mut mask = 0u64;
         match &self.how {
             How::Separable { w: weights } => {
@@ -165,8 +164,7 @@ impl SubCellBounds {
             }
             How::Table(table) => {
                 let s3 = self.s * self.s * self.s;
-                for sub in 0..subs {
-                    let terms = &table[sub * s3..(sub + 1) * s3];
+                for (terms, &covers) in table.chunks_exact(s3).zip(&self.covers) {
                     let (mut lo, mut hi, mut mag) = (0.0, 0.0, 0.0);
                     for (v, &(pl, ph)) in w.d.iter().zip(terms) {
                         if *v >= 0.0 {
@@ -180,7 +178,7 @@ impl SubCellBounds {
                     }
                     let eps = 1e-12 * mag;
                     if lo <= eps && hi > -eps {
-                        mask |= self.covers[sub];
+                        mask |= covers;
                     }
                 }
             }
