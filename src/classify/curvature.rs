@@ -1,7 +1,7 @@
-//! Second-derivative bounds of the field per tagged cell, so the refraction
-//! stage can prove that a ray leaving a crossing meets no other crossing in
-//! the rest of its cell (and the tagged cells after it), and skip their
-//! solves.
+//! Second-derivative bounds of the field around each tagged cell, so the
+//! refraction stage can prove that a ray leaving a crossing meets no other
+//! crossing in the rest of its cell (and the neighbouring cells after it),
+//! and skip their solves.
 //!
 //! Right after a crossing the new piece starts a hair past the root, inside
 //! a cell that holds the surface; its segment was then solved again and
@@ -15,9 +15,10 @@
 //! ```
 //!
 //! a concave quadratic, so when it is positive at both ends of the rest of
-//! the cell the segment holds no root. The path goes on through the next
-//! cells while they are tagged, `M` the largest of their bounds (an untagged
-//! cell holds no crossing, but has no bound to carry the argument past it).
+//! the cell the segment holds no root. `M` bounds the cell's 3³
+//! neighbourhood, tagged or not ([`neighbourhood_bound`]), so the path goes
+//! on through the next cells while they are the crossing cell's neighbours,
+//! with no other bound to look up.
 //!
 //! For a B-spline of degree `n ≥ 2` (non-negative weights summing to one) the
 //! second derivatives on a cell are B-splines of lower degree over the
@@ -59,14 +60,15 @@ impl CurvatureBounds {
         count * size_of::<HessianBound>()
     }
 
-    /// Bounds of every tagged cell of `index`; `None` when the filter has
+    /// The [`neighbourhood_bound`] of every tagged cell of `index`; `None` when the filter has
     /// none ([`applies`]). A bound beyond `f32` is infinite, and one from
     /// non-finite coefficients NaN: either clears nothing.
     pub fn build<T: Coefficient>(field: &Field<T>, index: Arc<TaggedIndex>) -> Option<Self> {
         if !applies(field.kernel()) {
             return None;
         }
-        let bounds = index.table(|cell| hessian_bound(field, cell).map(round_up));
+        let cells = crate::lattice::Lattice::new(field.kernel(), field.dims()).cells;
+        let bounds = index.table(|cell| neighbourhood_bound(field, cell, cells).map(round_up));
         Some(CurvatureBounds { index, bounds })
     }
 
@@ -117,6 +119,88 @@ pub fn hessian_bound<T: Coefficient>(field: &Field<T>, cell: [i64; 3]) -> [f64; 
     crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
         crate::with_support!(field.kernel().support(), S => hessian_bound_in::<S, T>(field, cell))
     })
+}
+
+/// [`hessian_bound`] over the cells next to `cell` too (its 3³
+/// neighbourhood within a lattice of `cells`): the bound a clearance uses on
+/// any path from the crossing cell that stays among its neighbours.
+///
+/// The neighbours' supports together are a cube of `S + 2` coefficients a
+/// side, and every difference of one neighbour's support is a difference
+/// of that cube and back, so the cube's bound is the largest of the 27
+/// cells' bounds (bit for bit: the same differences). At the lattice's
+/// faces the cube shifts inward and takes in a cell beyond the
+/// neighbourhood, which only loosens the bound; a lattice fewer than three
+/// cells across takes the cells' bounds one by one.
+pub fn neighbourhood_bound<T: Coefficient>(
+    field: &Field<T>,
+    cell: [i64; 3],
+    cells: [usize; 3],
+) -> [f64; 6] {
+    if cells.iter().any(|&n| n < 3) {
+        return neighbours_one_by_one(field, cell, cells);
+    }
+    let corner = std::array::from_fn(|a| (cell[a] - 1).clamp(0, cells[a] as i64 - 3));
+    macro_rules! cube {
+        ($($s:literal => $w:literal),*) => {
+            match field.kernel().support() {
+                $($s => crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
+                    cube_bound::<$s, $w, T>(field, corner)
+                }),)*
+                _ => neighbours_one_by_one(field, cell, cells),
+            }
+        };
+    }
+    cube!(3 => 5, 4 => 6, 5 => 7, 6 => 8, 7 => 9, 8 => 10)
+}
+
+/// [`support_bound`] of the `W = S + 2` coefficients a side that the
+/// supports of the 3³ cells from `corner` cover.
+#[inline(always)]
+fn cube_bound<const S: usize, const W: usize, T: Coefficient>(
+    field: &Field<T>,
+    corner: [i64; 3],
+) -> [f64; 6] {
+    let coeffs = field.coeffs();
+    let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
+    let base = field.support_offset(corner);
+    let data = coeffs.data();
+    let mut c = [[[0.0f64; W]; W]; W];
+    for (k, plane) in c.iter_mut().enumerate() {
+        for (j, row) in plane.iter_mut().enumerate() {
+            let src = &data[base + j * sy + k * sz..][..W];
+            for (x, v) in row.iter_mut().zip(src) {
+                *x = v.to_f64();
+            }
+        }
+    }
+    support_bound::<W>(&c)
+}
+
+/// [`neighbourhood_bound`] as the largest of the in-range neighbours'
+/// [`hessian_bound`]s (a NaN kept).
+fn neighbours_one_by_one<T: Coefficient>(
+    field: &Field<T>,
+    cell: [i64; 3],
+    cells: [usize; 3],
+) -> [f64; 6] {
+    let mut m = [0.0f64; 6];
+    for dz in -1..=1i64 {
+        for dy in -1..=1i64 {
+            for dx in -1..=1i64 {
+                let c = [cell[0] + dx, cell[1] + dy, cell[2] + dz];
+                if (0..3).any(|a| c[a] < 0 || c[a] >= cells[a] as i64) {
+                    continue;
+                }
+                for (acc, h) in m.iter_mut().zip(hessian_bound(field, c)) {
+                    if !acc.is_nan() && (h > *acc || h.is_nan()) {
+                        *acc = h;
+                    }
+                }
+            }
+        }
+    }
+    m
 }
 
 /// [`hessian_bound`] for support `S` (fixed loop bounds: the build runs once
@@ -305,6 +389,42 @@ mod tests {
             assert!(want.iter().any(|v| v.is_nan()), "{at:?}: a NaN to keep");
             let got = support_bound::<4>(&c);
             assert_eq!(got.map(f64::to_bits), want.map(f64::to_bits), "{at:?}");
+        }
+    }
+
+    /// [`neighbourhood_bound`] is bit for bit the largest of the in-range
+    /// neighbours' bounds where the cube is centred on the cell, and never
+    /// below it where it shifts at a face; lattices under three cells
+    /// across take it one by one.
+    #[test]
+    fn neighbourhood_bound_covers_the_neighbours() {
+        for dims in [[9usize, 8, 10], [3, 9, 4], [2, 6, 5]] {
+            let vol = crate::volume::scrambled_u8(dims, 23);
+            for name in ["bspline2", "bspline3", "bspline5", "bspline7"] {
+                let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
+                let lat = Lattice::new(f.kernel(), dims);
+                let (mut centred, mut shifted) = (0, 0);
+                for i in 0..lat.cell_count() {
+                    let cell = crate::lattice::cell_at(lat.cells, i);
+                    let got = neighbourhood_bound(&f, cell, lat.cells);
+                    let want = neighbours_one_by_one(&f, cell, lat.cells);
+                    let inner = (0..3).all(|a| cell[a] >= 1 && cell[a] + 2 <= lat.cells[a] as i64);
+                    if inner || lat.cells.iter().any(|&n| n < 3) {
+                        centred += 1;
+                        assert_eq!(
+                            got.map(f64::to_bits),
+                            want.map(f64::to_bits),
+                            "{name} {dims:?} {cell:?}"
+                        );
+                    } else {
+                        shifted += 1;
+                        for k in 0..6 {
+                            assert!(got[k] >= want[k], "{name} {dims:?} {cell:?} entry {k}");
+                        }
+                    }
+                }
+                assert!(centred > 0 && (shifted > 0 || lat.cells.iter().any(|&n| n < 3)));
+            }
         }
     }
 

@@ -1,22 +1,14 @@
 //! The crossing-cell clearing ([`super::clear_cells`]) eight checks at a
 //! time, with AVX-512.
 //!
-//! A check steps through at most [`MAX_CLEARED`] + 1 cells, and at each one
-//! looks up the cell's slot in the tagged-cell index, reads its curvature
-//! bound and evaluates the Taylor bound at the segment's ends: a short,
-//! dependent chain of scattered loads and a few dozen flops. One check at a
-//! time that chain is the whole cost (11.7% of the sphere's single-thread
-//! frame, `perf`); here eight checks run it together, the index and bound
-//! reads as gathers, every per-check choice a mask. Single thread, refract
-//! stage, min of 5 (sphere) and 3 (teapot) alternating runs: sphere 33.7 →
-//! 29.5 ms, teapot 94.9 → 79.2 ms.
-//!
-//! The batch's four groups step in turn, one cell each, and each step asks
-//! for the next cells' bounds as soon as it knows their slots: out of cache
-//! (the teapot's bounds), a group's chain of loads waits, and the other
-//! groups' steps fill that wait. Single thread, refract stage, min of 6
-//! alternating runs: teapot 51.0 → 45.6 ms, cranium 25.5 → 24.7, sphere
-//! (in cache) unchanged.
+//! A check reads the crossing cell's neighbourhood bound (one gather per
+//! entry, prefetched when the check was made), then steps through at most
+//! [`MAX_CLEARED`] + 1 cells of the neighbourhood, evaluating the Taylor
+//! bound at each segment's end: a few dozen flops a cell and no loads.
+//! Eight checks run together, every per-check choice a mask. (With a bound
+//! per cell, each step looked up the next cell's slot in the tagged-cell
+//! index and gathered its bound, a dependent chain of scattered loads that
+//! the batch's four groups stepping in turn hid; they still step in turn.)
 //!
 //! Every lane does the scalar clearing's arithmetic in the same order (no
 //! fused multiply-adds; `f64::min` as the compiler lowers it), so each ray
@@ -28,37 +20,25 @@ use std::arch::x86_64::*;
 use super::{ClearCheck, MAX_CLEARED};
 use crate::classify::CurvatureBounds;
 use crate::filter::coeffs::Coefficient;
-use crate::lattice::Bricked;
 use crate::render::context::Ctx;
 use crate::render::packet::Rays;
-use crate::render::stages::traverse::wide::{
-    self as walk, Lanes, bricked_index, exit_box, tagged_slot,
-};
+use crate::render::stages::traverse::wide::{self as walk, Lanes, exit_box};
 use crate::render::stats::Counters;
 
 const LANES: usize = 8;
 
 /// Whether the lane clearing can run over `bounds`: the CPU has the lane
-/// walk's features ([`walk::available`]), and the bounds' index covers the
-/// lattice in its brick layout (it always does; the gathers rely on it).
-pub fn fits<T: Coefficient>(ctx: &Ctx<T>, bounds: &CurvatureBounds) -> bool {
+/// walk's features ([`walk::available`]), and every slot of the index has
+/// its bound (it always does; the gathers rely on it).
+pub fn fits<T: Coefficient>(_ctx: &Ctx<T>, bounds: &CurvatureBounds) -> bool {
     let (index, table) = bounds.parts();
-    let bricked = index.bricked();
-    let (words, rank) = index.words();
-    walk::available()
-        && bricked == Bricked::new(ctx.lattice.cells)
-        && words.len() * 64 == bricked.len()
-        && rank.len() == words.len()
-        && table.len() == index.count()
+    walk::available() && table.len() == index.count()
 }
 
-/// What the lanes read: the index, the bounds, the lattice.
-struct Space<'a> {
-    words: &'a [u64],
-    rank: &'a [u32],
+/// What the lanes read: the bounds and the lattice.
+struct Space {
     /// The bounds' six `f32` values, slot after slot.
     bounds: *const f32,
-    bricks: [__m512i; 2],
     n: [__m512i; 3],
     margin: __m512d,
 }
@@ -77,10 +57,11 @@ struct Clearings {
     slope: __m512d,
     f0: __m512d,
     m: __m512d,
-    /// Lanes with a next (tagged) cell, the cell and its bound's slot.
+    /// The crossing cell: the path may not leave its 3³ neighbourhood.
+    origin: [__m512i; 3],
+    /// Lanes with a next cell in the neighbourhood, and the cell.
     has_next: __mmask8,
     next: [__m512i; 3],
-    next_slot: __m512i,
 }
 
 /// Settles `checks` as [`super::clear_cells`] does.
@@ -97,24 +78,13 @@ pub unsafe fn clear_cells<T: Coefficient>(
     rays: &mut Rays,
     c: &mut Counters,
 ) {
-    let (index, table) = bounds.parts();
-    let (words, rank) = index.words();
-    let b = index.bricked().bricks();
+    let (_, table) = bounds.parts();
     let space = Space {
-        words,
-        rank,
         bounds: table.as_ptr() as *const f32,
-        bricks: [
-            _mm512_set1_epi64(b[0] as i64),
-            _mm512_set1_epi64(b[1] as i64),
-        ],
         n: ctx.lattice.cells.map(|n| _mm512_set1_epi64(n as i64)),
         margin: _mm512_set1_pd(margin),
     };
-    // The groups step together, one cell each in turn: a step's loads (the
-    // next cell's index word, then its bound) depend on the last step's, and
-    // out of cache that chain is the cost, so the other groups' chains fill
-    // the wait.
+    // The groups step together, one cell each in turn.
     let mut groups: [Option<(Clearings, __mmask8)>; GROUPS] = [None; GROUPS];
     for batch in checks.chunks(LANES * GROUPS) {
         for (g, group) in groups.iter_mut().zip(batch.chunks(LANES)) {
@@ -250,24 +220,14 @@ impl Clearings {
             for a in 0..3 {
                 inside &= _mm512_cmplt_epu64_mask(next[a], s.n[a]);
             }
-            let (has, slot) =
-                tagged_slot((s.words, s.rank), bricked_index(&s.bricks, &next), inside);
-            self.has_next = (self.has_next & !m) | has;
+            let one = _mm512_set1_epi64(1);
+            for a in 0..3 {
+                let d = _mm512_abs_epi64(_mm512_sub_epi64(next[a], self.origin[a]));
+                inside &= _mm512_cmple_epi64_mask(d, one);
+            }
+            self.has_next = (self.has_next & !m) | inside;
             for a in 0..3 {
                 self.next[a] = _mm512_mask_mov_epi64(self.next[a], m, next[a]);
-            }
-            self.next_slot = _mm512_mask_mov_epi64(self.next_slot, m, slot);
-            // Ask for the next bounds now: the other groups step before
-            // this one reads them.
-            let mut slots = [0i64; LANES];
-            _mm512_storeu_epi64(slots.as_mut_ptr(), slot);
-            let mut bits = has;
-            while bits != 0 {
-                let l = bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                _mm_prefetch::<_MM_HINT_T0>(
-                    s.bounds.wrapping_add(6 * slots[l] as usize) as *const i8
-                );
             }
         }
     }
@@ -330,9 +290,9 @@ unsafe fn start<T: Coefficient>(
             slope: _mm512_abs_pd(slope),
             f0: _mm512_abs_pd(_mm512_loadu_pd(f0.as_ptr())),
             m: along(s, _mm512_loadu_epi64(slot.as_ptr()), valid, &ray.du),
+            origin: cell,
             has_next: 0,
             next: cell,
-            next_slot: _mm512_setzero_si512(),
         };
         live &= _mm512_cmp_pd_mask::<_CMP_LT_OQ>(cl.t0, cl.t1) & cl.clear(s, cl.m, cl.t1);
         cl.look_ahead(s, live);
@@ -356,10 +316,7 @@ unsafe fn step(
     unsafe {
         // `Clearing::extend` for the lanes with a next cell.
         let ext = live & cl.has_next;
-        let here = along(s, cl.next_slot, ext, &cl.ray.du);
-        let larger = _mm512_cmp_pd_mask::<_CMP_GT_OQ>(here, cl.m)
-            | _mm512_cmp_pd_mask::<_CMP_UNORD_Q>(here, here);
-        let m = _mm512_mask_mov_pd(cl.m, larger, here);
+        let m = cl.m;
         let t1 = span_end(&cl.ray, &cl.next, cl.t_end);
         let ok = ext & cl.clear(s, m, t1);
         apply(cl, live & !ok, rays, c);
