@@ -18,7 +18,9 @@ use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
 
-use crate::classify::{self, CurvatureBounds, Method, SubCellMasks, TaggedIndex, Tags, curvature};
+use crate::classify::{
+    self, CurvatureBounds, Method, PlaneBounds, SubCellMasks, TaggedIndex, Tags, curvature, plane,
+};
 use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
@@ -54,6 +56,7 @@ pub struct Accel {
     /// cell index), until [`Accel::masks`] files them by slot.
     found_masks: Mutex<Option<classify::masks::LinearMasks>>,
     curvature: OnceLock<Option<CurvatureBounds>>,
+    planes: OnceLock<Option<PlaneBounds>>,
 }
 
 /// Largest memory each per-tagged-cell table, counted with the whole index
@@ -153,6 +156,28 @@ impl Accel {
             })
         });
         (b.as_ref(), s)
+    }
+
+    /// The planes of the tagged cells ([`crate::classify::plane`]), built on
+    /// first use for the methods with sub-cell masks (a refinement within
+    /// the cell, as those are; the paper's BMCC and ACCC stay as it measured
+    /// them) when their records fit [`plane::CACHE_BUDGET`]; returns them
+    /// (or `None`) and the build time.
+    pub fn planes(&self, field: &AnyField) -> (Option<&PlaneBounds>, f64) {
+        let (p, s) = timed_once(&self.planes, || {
+            let count = self.octree.tags().count();
+            let iso = field.separating_iso(self.iso);
+            let bytes = PlaneBounds::bytes_for(count);
+            if !(self.method.has_masks() && bytes <= plane::CACHE_BUDGET && self.table_fits(bytes))
+            {
+                return None;
+            }
+            let masks = self.masks(field).0?;
+            Some(with_field!(field, f => {
+                PlaneBounds::build(f.as_ref(), self.tagged(), masks.parts().1, iso)
+            }))
+        });
+        (p.as_ref(), s)
     }
 }
 
@@ -312,6 +337,9 @@ impl Prepared {
         if render.clears_crossing_cells() {
             self.times.octree_s += a.curvature(&self.field).1;
         }
+        if render.skips_clear_segments() {
+            self.times.octree_s += a.planes(&self.field).1;
+        }
     }
 
     /// Loads and prepares what `scene` needs, without caching.
@@ -358,6 +386,7 @@ fn build_accel(
             masks: OnceLock::new(),
             found_masks: Mutex::new(found_masks),
             curvature: OnceLock::new(),
+            planes: OnceLock::new(),
         },
         classify_s,
         start.elapsed().as_secs_f64(),

@@ -287,6 +287,102 @@ fn assert_same_bits(a: &render::Frame, b: &render::Frame, what: &str) {
     same(&a.color, &b.color, what, "colour");
 }
 
+/// The solve stage passes over the segments a tagged cell's plane proves
+/// clear: the solves there would have found nothing, so every output bit
+/// stays the same — smooth and noisy phantoms, holes, Marschner–Lobb's thin
+/// features, every cell traversal, both storages, several filters (the
+/// planes need sub-cell masks: Bézier tags and ACCC per sub-cell) — while
+/// solves drop. (The walk's lane and scalar versions are held to the same
+/// decisions by the walk's own tests.)
+#[test]
+fn passing_over_clear_segments_changes_no_bit() {
+    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
+    let small = ["image.width=96", "image.height=96"];
+    let cases: [(&str, &[&str]); 7] = [
+        ("sphere.toml", &["render.traversal=distance"]),
+        (
+            "sphere.toml",
+            &["render.traversal=octree", "surface.filter=bspline2"],
+        ),
+        (
+            "sphere.toml",
+            &[
+                "render.traversal=dda",
+                "surface.filter=bspline5",
+                "render.classify=accc4",
+            ],
+        ),
+        (
+            "sphere.toml",
+            &[
+                "volume.phantom.noise=6",
+                "surface.filter=catmull-rom",
+                "render.traversal=distance",
+            ],
+        ),
+        (
+            "ball-two-holes.toml",
+            &["render.traversal=octree", "render.coefficients=f32"],
+        ),
+        (
+            "ball-one-hole.toml",
+            &["render.traversal=distance", "surface.filter=linear"],
+        ),
+        ("ml", &[]),
+    ];
+    // Marschner–Lobb's ripples: thin features, planes that fit less well.
+    let ml = r#"
+[image]
+width = 96
+height = 96
+[camera]
+kind = "perspective"
+position = [20.0, 14.0, -60.0]
+look_at = [20.0, 20.0, 20.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 40.0
+[volume.phantom]
+kind = "marschner-lobb"
+size = 41
+[surface]
+filter = "bspline3"
+iso = 0.5
+ior = 1.33
+[backdrop]
+center = [20.0, 20.0, 120.0]
+normal = [0.0, 0.0, -1.0]
+u_axis = [1.0, 0.0, 0.0]
+checker = 4.0
+[render]
+traversal = "octree"
+"#;
+    for (name, extra) in cases {
+        let o: Vec<String> = small.iter().chain(extra).map(|s| s.to_string()).collect();
+        let scene = if name == "ml" {
+            Scene::parse(ml, &dir.join("ml.toml"), &o).unwrap()
+        } else {
+            Scene::load(&dir.join(name), &o).unwrap()
+        };
+        let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
+        let (on, off) = with_and_without(&scene, vol, |s| s.render.skip_clear_segments = false);
+        assert_same_bits(&on, &off, &format!("{name} {extra:?}"));
+        let (c, d) = (on.stats.counters, off.stats.counters);
+        eprintln!(
+            "{name} {extra:?}: solves {} -> {}, sub-cell and plane skips {} -> {}",
+            d.cells_solved, c.cells_solved, d.subcell_skips, c.subcell_skips
+        );
+        assert!(
+            c.cells_solved < d.cells_solved,
+            "{name} {extra:?}: nothing passed over"
+        );
+        assert_eq!(
+            c.cells_solved + c.subcell_skips,
+            d.cells_solved + d.subcell_skips,
+            "{name} {extra:?}: a pass-over is one solve spared"
+        );
+    }
+}
+
 /// A ray leaving a crossing skips the rest of its cell where the curvature
 /// bound proves it empty: the solve there would have found nothing, so every
 /// output bit stays the same — on smooth and noisy phantoms, thin features

@@ -24,6 +24,7 @@ pub mod bound;
 mod cubic_mask;
 pub mod curvature;
 pub mod masks;
+pub mod plane;
 mod separable;
 pub mod tagged;
 pub mod tags;
@@ -35,6 +36,7 @@ use rayon::prelude::*;
 pub use bound::CellBound;
 pub use curvature::CurvatureBounds;
 pub use masks::SubCellMasks;
+pub use plane::PlaneBounds;
 pub use tagged::TaggedIndex;
 pub use tags::Tags;
 

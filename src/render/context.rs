@@ -4,7 +4,7 @@
 use glam::DVec3;
 
 use super::first_hit::FirstHit;
-use crate::classify::{CellBound, CurvatureBounds, SubCellMasks};
+use crate::classify::{CellBound, CurvatureBounds, PlaneBounds, SubCellMasks};
 use crate::filter::Field;
 use crate::filter::coeffs::Coefficient;
 use crate::lattice::Lattice;
@@ -56,6 +56,9 @@ pub struct Ctx<'a, T: Coefficient = f64> {
     /// Second-derivative bounds of the tagged cells (B-splines of degree ≥ 2),
     /// when `clear_crossing_cells` is on.
     pub curvature: Option<&'a CurvatureBounds>,
+    /// Planes of the tagged cells, when `skip_clear_segments` is on and the
+    /// classification has them ([`crate::prepare::Accel::planes`]).
+    pub planes: Option<&'a PlaneBounds>,
     /// Where primary rays may start their walk, per pixel block, when
     /// [`RenderSettings::skips_empty_approach`].
     pub first_hit: Option<FirstHit>,
@@ -121,6 +124,11 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
             masks: prep.accel.as_ref().and_then(|a| a.masks(&prep.field).0),
             curvature: if scene.render.clears_crossing_cells() {
                 prep.accel.as_ref().and_then(|a| a.curvature(&prep.field).0)
+            } else {
+                None
+            },
+            planes: if scene.render.skips_clear_segments() {
+                prep.accel.as_ref().and_then(|a| a.planes(&prep.field).0)
             } else {
                 None
             },

@@ -59,7 +59,8 @@ pub struct Counters {
     pub cells_visited: u64,
     /// Tagged cells passed without a solve: the box of sub-cells the ray's
     /// segment spans holds none of their tagged sub-cells
-    /// ([`crate::classify::bezier::SubCells`]).
+    /// ([`crate::classify::bezier::SubCells`]), or the cell's plane proves
+    /// the segment clear of the surface ([`crate::classify::plane`]).
     pub subcell_skips: u64,
     /// Cells passed without a solve right after a crossing — the rest of the
     /// one the new piece starts in and the tagged cells after it — where the

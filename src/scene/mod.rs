@@ -378,6 +378,9 @@ struct RenderCfg {
     /// Start primary rays where the first occupied octree block can be.
     #[serde(default = "default_true")]
     skip_empty_approach: bool,
+    /// Pass over the segments a cell's plane bound proves clear.
+    #[serde(default = "default_true")]
+    skip_clear_segments: bool,
 }
 
 fn default_step() -> f64 {
@@ -451,6 +454,7 @@ impl Default for RenderCfg {
             coefficients: Storage::default(),
             clear_crossing_cells: true,
             skip_empty_approach: true,
+            skip_clear_segments: true,
         }
     }
 }
@@ -521,9 +525,21 @@ pub struct RenderSettings {
     /// measures). No output bit changes — tested. Off only to measure what it
     /// saves.
     pub skip_empty_approach: bool,
+    /// The solve stage passes over the segments that a tagged cell's plane
+    /// and its bound prove clear of the iso-surface
+    /// ([`crate::classify::plane`]; cell traversals with precomputed tags:
+    /// the solves there would find nothing, so no output bit changes —
+    /// tested). Off only to measure what it saves.
+    pub skip_clear_segments: bool,
 }
 
 impl RenderSettings {
+    /// Whether the solve stage passes over segments its planes prove clear
+    /// (see [`RenderSettings::skip_clear_segments`]).
+    pub fn skips_clear_segments(&self) -> bool {
+        self.traversal != Traversal::Step && self.skip_clear_segments
+    }
+
     /// Whether primary rays skip their empty approach (see
     /// [`RenderSettings::skip_empty_approach`]).
     pub fn skips_empty_approach(&self) -> bool {
@@ -1053,6 +1069,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         coefficients: r.coefficients,
         clear_crossing_cells: r.clear_crossing_cells,
         skip_empty_approach: r.skip_empty_approach,
+        skip_clear_segments: r.skip_clear_segments,
     };
 
     let scene = Scene {

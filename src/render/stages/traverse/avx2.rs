@@ -30,10 +30,11 @@ use std::sync::OnceLock;
 use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
 use super::wide::{
-    CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks, layout_fits,
-    reads_block_map,
+    CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks, lane_planes,
+    layout_fits, reads_block_map,
 };
 use crate::classify::bezier::SUB;
+use crate::classify::plane::CellTests;
 use crate::filter::coeffs::Coefficient;
 use crate::octree::distance::Proximity;
 use crate::octree::{OCCUPIED, Octree, TAGGED};
@@ -143,6 +144,55 @@ unsafe fn sel(m: __m256i, yes: __m256i, no: __m256i) -> __m256i {
     unsafe { _mm256_blendv_epi8(no, yes, m) }
 }
 
+/// The lanes of bit set `m` whose cell's plane (at `slot`) proves the
+/// segment `t0..t1` clear of the surface, one lane at a time with
+/// [`crate::classify::PlaneBounds::clears`]'s operations.
+#[inline(always)]
+unsafe fn plane_clears(
+    (tests, margin): (&[CellTests], f64),
+    l: &Lanes,
+    t0: __m256d,
+    t1: __m256d,
+    slot: __m256i,
+    m: u32,
+) -> u32 {
+    // SAFETY: called only from functions with AVX2; each array holds four
+    // lanes.
+    unsafe {
+        let pd = |v: __m256d| {
+            let mut o = [0.0; 4];
+            _mm256_storeu_pd(o.as_mut_ptr(), v);
+            o
+        };
+        let (t0, t1) = (pd(t0), pd(t1));
+        let ou = l.ou.map(pd);
+        let du = l.du.map(pd);
+        let mut cell = [[0i64; 4]; 3];
+        for (a, c) in cell.iter_mut().enumerate() {
+            _mm256_storeu_si256(c.as_mut_ptr() as *mut __m256i, l.cell[a]);
+        }
+        let mut slots = [0i64; 4];
+        _mm256_storeu_si256(slots.as_mut_ptr() as *mut __m256i, slot);
+        let mut clear = 0;
+        for k in (0..4).filter(|&k| m >> k & 1 == 1) {
+            let p = &tests[slots[k] as usize].plane;
+            let at = |t: f64| {
+                let mut v = p[0] as f64;
+                for a in 0..3 {
+                    v += p[1 + a] as f64 * (ou[a][k] + t * du[a][k] - cell[a][k] as f64);
+                }
+                v
+            };
+            let e = p[4] as f64 + margin;
+            let (v0, v1) = (at(t0[k]), at(t1[k]));
+            if (v0 > e && v1 > e) || (v0 < -e && v1 < -e) {
+                clear |= 1 << k;
+            }
+        }
+        clear
+    }
+}
+
 /// The dword lanes 0, 2, 4, 6 of a lane mask: the mask of a gather of
 /// 32-bit values by 64-bit indices.
 #[inline(always)]
@@ -214,6 +264,8 @@ struct Space<'a, R> {
     bricks: [__m256i; 2],
     reach: R,
     masks: Option<(&'a [u64], &'a [u32], &'a [u64])>,
+    /// The tagged cells' planes in the same slot order, and their margin.
+    planes: Option<(&'a [CellTests], f64)>,
 }
 
 impl<'a, R> Space<'a, R> {
@@ -224,6 +276,7 @@ impl<'a, R> Space<'a, R> {
             bricks: self.bricks,
             reach,
             masks: self.masks,
+            planes: self.planes,
         }
     }
 }
@@ -694,7 +747,13 @@ unsafe fn step<R: LaneReach>(s: &Space<R>, l: &mut Lanes, live: u32, c: &mut Cou
                         index,
                         has,
                     );
-                    let meet = _mm256_and_si256(has, may_meet(l, t0, t1, mask));
+                    let mut meet = _mm256_and_si256(has, may_meet(l, t0, t1, mask));
+                    if let Some(planes) = s.planes
+                        && bits(meet) != 0
+                    {
+                        let clear = lane_mask(plane_clears(planes, l, t0, t1, index, bits(meet)));
+                        meet = _mm256_andnot_si256(clear, meet);
+                    }
                     let has = _mm256_and_si256(has, tagged);
                     (
                         _mm256_or_si256(
@@ -836,6 +895,7 @@ unsafe fn walk_octree_on<T: Coefficient>(
         ],
         reach: (),
         masks: lane_masks(ctx),
+        planes: lane_planes(ctx),
     };
     let leaf_level = _mm256_set1_epi64x(leaf_level as i64);
     STAGED.with_borrow_mut(|staged| {
@@ -881,6 +941,7 @@ pub unsafe fn walk_distance<T: Coefficient>(
             last: ctx.lattice.cells.map(|n| _mm256_set1_epi64x(n as i64 - 1)),
         },
         masks: lane_masks(ctx),
+        planes: lane_planes(ctx),
     };
     STAGED.with_borrow_mut(|staged| {
         // SAFETY: the caller checked the features.

@@ -491,7 +491,8 @@ pub(crate) fn walk_start<T: Coefficient>(
 /// The segment of the ray's piece inside tagged `cell` to solve (from the
 /// ray and the cell alone, so it is the same bits however the walk got
 /// here), or `None` when it provably meets none of the cell's tagged
-/// sub-cells.
+/// sub-cells, or the cell's plane proves it clear of the surface
+/// ([`crate::classify::plane`]).
 #[inline(always)]
 fn tagged_segment<T: Coefficient>(
     ctx: &Ctx<T>,
@@ -504,12 +505,35 @@ fn tagged_segment<T: Coefficient>(
     let t0 = fmax(c0, t_start);
     let t1 = fmax(fmin(c1, t_end), t0);
     match ctx.masks.and_then(|m| m.get(cell)) {
-        // The mask only decides whether to solve: the solve itself gets the
-        // whole segment, so its polynomial (and every root, tangential touch
-        // and tolerance decision) is the same bits with or without masks.
-        Some(mask) => may_meet_tagged_sub_cell(ray, cell, t0, t1, mask).then_some((t0, t1)),
+        // The mask and the plane only decide whether to solve: the solve
+        // itself gets the whole segment, so its polynomial (and every root,
+        // tangential touch and tolerance decision) is the same bits with or
+        // without them.
+        Some(mask) => (may_meet_tagged_sub_cell(ray, cell, t0, t1, mask)
+            && !plane_clears(ctx, ray, cell, t0, t1))
+        .then_some((t0, t1)),
         None => Some((t0, t1)),
     }
+}
+
+/// Whether `cell`'s plane, when the scene has planes, proves the segment
+/// `t0..t1` of `ray` in it clear of the surface.
+#[inline(always)]
+fn plane_clears<T: Coefficient>(
+    ctx: &Ctx<T>,
+    ray: &CellRay,
+    cell: [i64; 3],
+    t0: f64,
+    t1: f64,
+) -> bool {
+    let Some(planes) = ctx.planes else {
+        return false;
+    };
+    let Some(slot) = planes.slot(cell) else {
+        return false;
+    };
+    let local = |t: f64| std::array::from_fn(|a| ray.ou[a] + t * ray.du[a] - cell[a] as f64);
+    planes.clears(planes.at(slot), local(t0), local(t1))
 }
 
 /// Where a walk over precomputed tags may jump from a cell.

@@ -52,6 +52,7 @@ use std::sync::OnceLock;
 use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
 use crate::classify::bezier::SUB;
+use crate::classify::plane::CellTests;
 use crate::filter::coeffs::Coefficient;
 use crate::lattice::Bricked;
 use crate::octree::distance::Proximity;
@@ -237,6 +238,8 @@ struct Space<'a, R> {
     /// The tagged-cell index's words and ranks, and the sub-cell masks in
     /// its slot order.
     masks: Option<(&'a [u64], &'a [u32], &'a [u64])>,
+    /// The tagged cells' planes in the same slot order, and their margin.
+    planes: Option<(&'a [CellTests], f64)>,
 }
 
 impl<'a, R> Space<'a, R> {
@@ -247,6 +250,7 @@ impl<'a, R> Space<'a, R> {
             bricks: self.bricks,
             reach,
             masks: self.masks,
+            planes: self.planes,
         }
     }
 }
@@ -617,6 +621,64 @@ unsafe fn may_meet(l: &Lanes, t0: __m512d, t1: __m512d, mask: __m512i) -> __mmas
     }
 }
 
+/// The lanes of `m` whose cell's plane (in the record at `record`, in
+/// 8-byte words) proves the segment `t0..t1` clear of the surface, as
+/// [`crate::classify::PlaneBounds::clears`] decides for one (the same
+/// operations in the same order).
+#[inline(always)]
+unsafe fn plane_clears(
+    (tests, margin): (&[CellTests], f64),
+    l: &Lanes,
+    t0: __m512d,
+    t1: __m512d,
+    record: __m512i,
+    m: __mmask8,
+) -> __mmask8 {
+    // SAFETY: called only from the walk, which runs with the features these
+    // intrinsics need; the lanes of `m` hold records of tagged cells, below
+    // the records' count.
+    unsafe {
+        // Three gathers of pairs (the record's words 1 to 3), each split
+        // into its two values.
+        let base = _mm512_add_epi64(record, _mm512_set1_epi64(1));
+        let evens_then_odds =
+            _mm512_setr_epi32(0, 2, 4, 6, 8, 10, 12, 14, 1, 3, 5, 7, 9, 11, 13, 15);
+        let mut p = [_mm512_setzero_pd(); 6];
+        for k in 0..3 {
+            let pairs = _mm512_mask_i64gather_epi64::<8>(
+                _mm512_setzero_si512(),
+                m,
+                _mm512_add_epi64(base, _mm512_set1_epi64(k as i64)),
+                tests.as_ptr() as *const i64,
+            );
+            let split = _mm512_permutexvar_ps(evens_then_odds, _mm512_castsi512_ps(pairs));
+            p[2 * k] = _mm512_cvtps_pd(_mm512_castps512_ps256(split));
+            p[2 * k + 1] = _mm512_cvtps_pd(_mm256_castpd_ps(_mm512_extractf64x4_pd::<1>(
+                _mm512_castps_pd(split),
+            )));
+        }
+        let at = |t: __m512d| {
+            let mut v = p[0];
+            for a in 0..3 {
+                let u = _mm512_sub_pd(
+                    _mm512_add_pd(l.ou[a], _mm512_mul_pd(t, l.du[a])),
+                    _mm512_cvtepi64_pd(l.cell[a]),
+                );
+                v = _mm512_add_pd(v, _mm512_mul_pd(p[1 + a], u));
+            }
+            v
+        };
+        let e = _mm512_add_pd(p[4], _mm512_set1_pd(margin));
+        let ne = _mm512_sub_pd(_mm512_setzero_pd(), e);
+        let (v0, v1) = (at(t0), at(t1));
+        let above =
+            _mm512_cmp_pd_mask::<_CMP_GT_OQ>(v0, e) & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(v1, e);
+        let below =
+            _mm512_cmp_pd_mask::<_CMP_LT_OQ>(v0, ne) & _mm512_cmp_pd_mask::<_CMP_LT_OQ>(v1, ne);
+        m & (above | below)
+    }
+}
+
 /// [`super::cell_span`] per lane, then clipped to the piece as
 /// [`super::tagged_segment`] does.
 #[inline(always)]
@@ -808,13 +870,35 @@ unsafe fn step<R: LaneReach>(
                     // hold lattice cells; a tagged cell's slot is below the
                     // tag count, the masks' length.
                     let (has, index) = tagged_slot((words, rank), slot, go);
-                    let mask = _mm512_mask_i64gather_epi64::<8>(
-                        _mm512_setzero_si512(),
-                        has,
-                        index,
-                        masks.as_ptr() as *const i64,
-                    );
-                    let meet = has & may_meet(l, t0, t1, mask);
+                    // With planes, each cell's mask and plane are one
+                    // record ([`CellTests`]): the plane's gathers read the
+                    // line the mask's brought in.
+                    let meet = match s.planes {
+                        None => {
+                            let mask = _mm512_mask_i64gather_epi64::<8>(
+                                _mm512_setzero_si512(),
+                                has,
+                                index,
+                                masks.as_ptr() as *const i64,
+                            );
+                            has & may_meet(l, t0, t1, mask)
+                        }
+                        Some(planes) => {
+                            let record = _mm512_slli_epi64::<2>(index);
+                            let mask = _mm512_mask_i64gather_epi64::<8>(
+                                _mm512_setzero_si512(),
+                                has,
+                                record,
+                                planes.0.as_ptr() as *const i64,
+                            );
+                            let meet = has & may_meet(l, t0, t1, mask);
+                            if meet == 0 {
+                                0
+                            } else {
+                                meet & !plane_clears(planes, l, t0, t1, record, meet)
+                            }
+                        }
+                    };
                     let has = has & tagged;
                     ((tagged & !has) | (tagged & meet), has & !meet)
                 }
@@ -923,6 +1007,21 @@ pub(super) fn distance_layout_fits<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) 
 }
 
 /// The sub-cell masks' index and masks, as the walk gathers them.
+pub(super) fn lane_planes<'a, T: Coefficient>(ctx: &Ctx<'a, T>) -> Option<(&'a [CellTests], f64)> {
+    // Planes come with masks (the same tagged-cell index); without masks
+    // the walk never looks them up.
+    let masks = ctx.masks?;
+    ctx.planes.map(|p| {
+        let (_, planes, margin) = p.parts();
+        assert_eq!(
+            planes.len(),
+            masks.parts().0.count(),
+            "planes and masks share their slots"
+        );
+        (planes, margin)
+    })
+}
+
 pub(super) fn lane_masks<'a, T: Coefficient>(
     ctx: &Ctx<'a, T>,
 ) -> Option<(&'a [u64], &'a [u32], &'a [u64])> {
@@ -980,6 +1079,7 @@ unsafe fn walk_octree_on<T: Coefficient>(
         ],
         reach: (),
         masks: lane_masks(ctx),
+        planes: lane_planes(ctx),
     };
     let leaf_level = _mm512_set1_epi64(leaf_level as i64);
     STAGED.with_borrow_mut(|staged| {
@@ -1026,6 +1126,7 @@ pub unsafe fn walk_distance<T: Coefficient>(
             last: ctx.lattice.cells.map(|n| _mm512_set1_epi64(n as i64 - 1)),
         },
         masks: lane_masks(ctx),
+        planes: lane_planes(ctx),
     };
     STAGED.with_borrow_mut(|staged| {
         // SAFETY: the caller checked the features.
