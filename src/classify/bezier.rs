@@ -481,6 +481,50 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
     }
 }
 
+/// Calls `each(k, patch)` with the tensor Bernstein coefficients of
+/// `f - iso` over `cells[k]`, for every `k` in order: the patches of eight
+/// cells at a time in the lanes of the running instruction set, as
+/// [`refine_in_lanes`] builds them (the same values as [`cell_bernstein`]).
+pub(crate) fn each_patch<T: Coefficient>(
+    field: &Field<T>,
+    cells: &[[i64; 3]],
+    iso: f64,
+    beta: &[f64],
+    mut each: impl FnMut(usize, &[f64]),
+) {
+    crate::with_support!(field.kernel().support(), S => crate::with_isa!(Isa::current(), L, _M => {
+        patches_in_lanes::<S, L, T>(field, cells, iso, beta, &mut each)
+    }))
+}
+
+#[inline(always)]
+fn patches_in_lanes<const S: usize, const L: usize, T: Coefficient>(
+    field: &Field<T>,
+    cells: &[[i64; 3]],
+    iso: f64,
+    beta: &[f64],
+    each: &mut impl FnMut(usize, &[f64]),
+) {
+    let m = rows::<S>(beta);
+    let n = S * S * S;
+    let (mut lanes, mut scratch) = (vec![0.0; n * L], vec![0.0; n * L]);
+    let mut patch = vec![0.0; n];
+    for (g, group) in cells.chunks(L).enumerate() {
+        // Lanes past the group's end keep an earlier group's values, never
+        // read.
+        for (l, &cell) in group.iter().enumerate() {
+            support_minus_iso_lane::<S, L, T>(field, cell, iso, l, &mut lanes);
+        }
+        bernstein_in_place::<S, L>(&mut lanes, &mut scratch, &m);
+        for l in 0..group.len() {
+            for (p, v) in patch.iter_mut().zip(lanes.chunks_exact(L)) {
+                *p = v[l];
+            }
+            each(g * L + l, &patch);
+        }
+    }
+}
+
 /// [`straddles`] of each of `L` interleaved tensors (element `e` of lane
 /// `l` at `e·L + l`), lane by lane the same test.
 #[inline(always)]
