@@ -54,11 +54,13 @@ pub struct CellTests {
 /// The largest table of [`CellTests`] a render uses: the walk gathers a
 /// record at every tagged cell a ray reaches, and once the table outgrows
 /// a core's cache those gathers wait longer than the solves they spare.
-/// Measured (2 threads, alternating builds): the glass sphere's 10,490
+/// Measured (2 threads, alternating builds; BENCHMARKS.md, *One curvature
+/// bound per crossing cell, and planes*): the glass sphere's 10,490
 /// records (0.3 MiB) cut its solves per ray 1.37 → 1.01 and its frame
-/// 31.1 / 32.5 → 29.9 / 30.0 ms; the teapot's 378k (12 MiB) cut its
-/// solves 2.44 → 1.76 but raised its walk 66–76 → 95–97 ms CPU and its
-/// frame 93.4 / 99.8 → 100.3 / 101.6 ms. 1 MiB is one core's L2 here.
+/// (distance, PRSS) 31.0 / 30.5 / 31.6 → 29.7 / 29.2 / 32.3 ms; the
+/// teapot's 378,692 (11.6 MiB) cut its solves 2.44 → 1.76 but raised its
+/// walk 66–76 → 95–97 ms CPU and its frame 93.4 / 99.8 → 100.3 / 101.6
+/// ms. 1 MiB is one core's L2 here.
 pub const CACHE_BUDGET: usize = 1 << 20;
 
 /// Cells per parallel task of [`PlaneBounds::build`].

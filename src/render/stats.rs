@@ -63,8 +63,9 @@ pub struct Counters {
     /// the segment clear of the surface ([`crate::classify::plane`]).
     pub subcell_skips: u64,
     /// Cells passed without a solve right after a crossing — the rest of the
-    /// one the new piece starts in and the tagged cells after it — where the
-    /// curvature bound proves them empty ([`crate::classify::curvature`]).
+    /// one the new piece starts in and the crossing cell's neighbours after
+    /// it, tagged or not — where the curvature bound proves them empty
+    /// ([`crate::classify::curvature`]).
     pub cells_cleared: u64,
     /// Cells whose crossing problem was solved (restriction built and isolated).
     pub cells_solved: u64,

@@ -513,7 +513,8 @@ pub struct RenderSettings {
     pub seed: u64,
     pub coefficients: Storage,
     /// A ray leaving a crossing skips the rest of the cell it starts in, and
-    /// the tagged cells after it, where the field's second-derivative bounds
+    /// the cells after it among that cell's neighbours, where the field's
+    /// second-derivative bounds
     /// prove they hold no other crossing (B-splines of degree ≥ 2 with
     /// precomputed tags; the solves there would find nothing, so no output
     /// bit changes — tested). Off only to measure what it saves.

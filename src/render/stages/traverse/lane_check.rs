@@ -64,6 +64,9 @@ pub(super) trait LaneWalk {
 /// centred maps).
 pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
     let odd = [0.0, -0.0, 1e-300, -1e-300, f64::NAN];
+    // Segments the planes passed over, by traversal (the scalar walk's
+    // skips with planes less its skips without).
+    let mut passed = std::collections::HashMap::<&str, u64>::new();
     // Distance walks over the eight octant maps (budget unlimited) and
     // over the centred map (no budget).
     for (traversal, method, seed, budget) in [
@@ -90,6 +93,13 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
             };
             assert!(W::fits(&ctx, tree), "{traversal} {method:?}");
             assert_eq!(ctx.masks.is_some(), method.has_masks());
+            // Planes come with masks: the walks' plane tests are compared
+            // too (and below, shown to pass segments over).
+            assert_eq!(ctx.planes.is_some(), method.has_masks(), "{traversal} {method:?}: planes");
+            let mut sc_plain = sc.clone();
+            sc_plain.render.skip_clear_segments = false;
+            let plain = Ctx::new(&sc_plain, &prep, f.as_ref());
+            assert!(plain.planes.is_none());
             let cubes = budget.map(|b| Proximity::build_within(tree.tags(), b));
             if let Some(p) = &cubes {
                 assert_eq!(p.is_octant(), budget > Some(0));
@@ -161,6 +171,21 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
                 let (mut ca, mut cb) = (Counters::default(), Counters::default());
                 scalar(&mut a, &input, &mut sa, &mut ra, &mut ca);
                 lanes(&mut b, &input, &mut sb, &mut rb, &mut cb);
+                if ctx.planes.is_some() {
+                    // The scalar walk without planes skips fewer cells.
+                    let mut x = rays.clone();
+                    let (mut sx, mut rx) = (Queue::new_in(&bump), Queue::new_in(&bump));
+                    let mut cx = Counters::default();
+                    match &cubes {
+                        Some(p) => walk_interleaved(&plain, DistanceCubes::new(p), &mut x, &input, &mut sx, &mut rx, &mut cx),
+                        None => {
+                            let octree = OctreeBlocks { tree, leaf_level: *leaf_level };
+                            walk_interleaved(&plain, octree, &mut x, &input, &mut sx, &mut rx, &mut cx)
+                        }
+                    }
+                    assert!(ca.subcell_skips >= cx.subcell_skips);
+                    *passed.entry(traversal).or_default() += ca.subcell_skips - cx.subcell_skips;
+                }
                 let sorted = |q: &Queue| {
                     let mut v = q.to_vec();
                     v.sort_unstable();
@@ -188,5 +213,12 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
             }
             assert!(solved > 2000 && rounds > 3, "{traversal} {method:?}: {solved} solves in {rounds} rounds");
         });
+    }
+    // The planes' tests were compared where they passed segments over.
+    for traversal in ["octree", "dda", "distance"] {
+        assert!(
+            passed.get(traversal).is_some_and(|&n| n > 0),
+            "{traversal}: {passed:?}"
+        );
     }
 }

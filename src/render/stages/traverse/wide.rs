@@ -1006,22 +1006,24 @@ pub(super) fn distance_layout_fits<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) 
         && masks_fit(ctx, bricked)
 }
 
-/// The sub-cell masks' index and masks, as the walk gathers them.
+/// The tagged cells' records (mask and plane) and the planes' margin, as
+/// the walk gathers them: with masks only (the walk looks planes up where
+/// a mask passes), kept in the masks' index and built from their masks.
 pub(super) fn lane_planes<'a, T: Coefficient>(ctx: &Ctx<'a, T>) -> Option<(&'a [CellTests], f64)> {
-    // Planes come with masks (the same tagged-cell index); without masks
-    // the walk never looks them up.
     let masks = ctx.masks?;
     ctx.planes.map(|p| {
-        let (_, planes, margin) = p.parts();
-        assert_eq!(
-            planes.len(),
-            masks.parts().0.count(),
+        let (index, planes, margin) = p.parts();
+        let (mask_index, mask_words) = masks.parts();
+        assert!(
+            std::ptr::eq(index, mask_index) && planes.len() == mask_words.len(),
             "planes and masks share their slots"
         );
+        debug_assert!(planes.iter().zip(mask_words).all(|(t, &m)| t.mask == m));
         (planes, margin)
     })
 }
 
+/// The sub-cell masks' index and masks, as the walk gathers them.
 pub(super) fn lane_masks<'a, T: Coefficient>(
     ctx: &Ctx<'a, T>,
 ) -> Option<(&'a [u64], &'a [u32], &'a [u64])> {
