@@ -287,6 +287,45 @@ fn assert_same_bits(a: &render::Frame, b: &render::Frame, what: &str) {
     same(&a.color, &b.color, what, "colour");
 }
 
+/// Marschner–Lobb's signal at its standard 41³: thin, high-frequency
+/// features (case `"ml"` of [`load_case`]).
+const ML_SCENE: &str = r#"
+[image]
+width = 96
+height = 96
+[camera]
+kind = "perspective"
+position = [20.0, 14.0, -60.0]
+look_at = [20.0, 20.0, 20.0]
+up = [0.0, 1.0, 0.0]
+fov_y = 40.0
+[volume.phantom]
+kind = "marschner-lobb"
+size = 41
+[surface]
+filter = "bspline3"
+iso = 0.5
+ior = 1.33
+[backdrop]
+center = [20.0, 20.0, 120.0]
+normal = [0.0, 0.0, -1.0]
+u_axis = [1.0, 0.0, 0.0]
+checker = 4.0
+[render]
+traversal = "distance"
+"#;
+
+/// Scene `name` of `dir` (or [`ML_SCENE`] for `"ml"`) with `small` and
+/// `extra` overrides.
+fn load_case(dir: &std::path::Path, name: &str, small: &[&str], extra: &[&str]) -> Scene {
+    let o: Vec<String> = small.iter().chain(extra).map(|s| s.to_string()).collect();
+    if name == "ml" {
+        Scene::parse(ML_SCENE, &dir.join("ml.toml"), &o).unwrap()
+    } else {
+        Scene::load(&dir.join(name), &o).unwrap()
+    }
+}
+
 /// The solve stage passes over the segments a tagged cell's plane proves
 /// clear: the solves there would have found nothing, so every output bit
 /// stays the same — smooth and noisy phantoms, holes, Marschner–Lobb's thin
@@ -328,41 +367,11 @@ fn passing_over_clear_segments_changes_no_bit() {
             "ball-one-hole.toml",
             &["render.traversal=distance", "surface.filter=linear"],
         ),
-        ("ml", &[]),
+        // Marschner–Lobb's ripples: thin features, planes that fit less well.
+        ("ml", &["render.traversal=octree"]),
     ];
-    // Marschner–Lobb's ripples: thin features, planes that fit less well.
-    let ml = r#"
-[image]
-width = 96
-height = 96
-[camera]
-kind = "perspective"
-position = [20.0, 14.0, -60.0]
-look_at = [20.0, 20.0, 20.0]
-up = [0.0, 1.0, 0.0]
-fov_y = 40.0
-[volume.phantom]
-kind = "marschner-lobb"
-size = 41
-[surface]
-filter = "bspline3"
-iso = 0.5
-ior = 1.33
-[backdrop]
-center = [20.0, 20.0, 120.0]
-normal = [0.0, 0.0, -1.0]
-u_axis = [1.0, 0.0, 0.0]
-checker = 4.0
-[render]
-traversal = "octree"
-"#;
     for (name, extra) in cases {
-        let o: Vec<String> = small.iter().chain(extra).map(|s| s.to_string()).collect();
-        let scene = if name == "ml" {
-            Scene::parse(ml, &dir.join("ml.toml"), &o).unwrap()
-        } else {
-            Scene::load(&dir.join(name), &o).unwrap()
-        };
+        let scene = load_case(&dir, name, &small, extra);
         let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
         let (on, off) = with_and_without(&scene, vol, |s| s.render.skip_clear_segments = false);
         assert_same_bits(&on, &off, &format!("{name} {extra:?}"));
@@ -392,31 +401,6 @@ traversal = "octree"
 fn clearing_crossing_cells_changes_no_bit() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
     let small = ["image.width=96", "image.height=96"];
-    let ml = r#"
-[image]
-width = 96
-height = 96
-[camera]
-kind = "perspective"
-position = [20.0, 14.0, -60.0]
-look_at = [20.0, 20.0, 20.0]
-up = [0.0, 1.0, 0.0]
-fov_y = 40.0
-[volume.phantom]
-kind = "marschner-lobb"
-size = 41
-[surface]
-filter = "bspline3"
-iso = 0.5
-ior = 1.33
-[backdrop]
-center = [20.0, 20.0, 120.0]
-normal = [0.0, 0.0, -1.0]
-u_axis = [1.0, 0.0, 0.0]
-checker = 4.0
-[render]
-traversal = "distance"
-"#;
     let cases: [(&str, &[&str]); 8] = [
         ("sphere.toml", &["render.traversal=distance"]),
         (
@@ -454,12 +438,7 @@ traversal = "distance"
         ),
     ];
     for (name, extra) in cases {
-        let o: Vec<String> = small.iter().chain(extra).map(|s| s.to_string()).collect();
-        let scene = if name == "ml" {
-            Scene::parse(ml, &dir.join("ml.toml"), &o).unwrap()
-        } else {
-            Scene::load(&dir.join(name), &o).unwrap()
-        };
+        let scene = load_case(&dir, name, &small, extra);
         let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
         let (on, off) = with_and_without(&scene, vol, |s| s.render.clear_crossing_cells = false);
         assert_same_bits(&on, &off, &format!("{name} {extra:?}"));

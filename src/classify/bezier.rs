@@ -421,6 +421,7 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
     let m = rows::<S>(&sub.beta);
     let n = S * S * S;
     let mut group = [0usize; L];
+    let mut corners = [[0i64; 3]; L];
     let (mut lanes, mut scratch) = (vec![0.0; n * L], vec![0.0; n * L]);
     let mut patch = vec![0.0; n];
     let mut cells = cells.peekable();
@@ -428,42 +429,10 @@ fn refine_in_lanes<const S: usize, const L: usize, T: Coefficient>(
         let mut len = 0;
         for (slot, i) in group.iter_mut().zip(&mut cells) {
             *slot = i;
+            corners[len] = cell_at(lattice.cells, i);
             len += 1;
         }
-        if S == 4 {
-            // Lanes past `len` repeat the last cell; their results are not
-            // read.
-            let base: [usize; L] = std::array::from_fn(|l| {
-                field.support_offset(cell_at(lattice.cells, group[l.min(len - 1)]))
-            });
-            let (data, sy, sz) = field.lane_rows::<S, L>(&base);
-            for k in 0..S {
-                for j in 0..S {
-                    // SAFETY: every row of every lane lies inside `data`
-                    // (checked by `lane_rows`), and `L` is the lane count
-                    // `with_isa!` chose for this CPU.
-                    let r =
-                        unsafe { crate::simd::gather_rows4::<T, L>(data, &base, j * sy + k * sz) };
-                    for (i, row) in r.iter().enumerate() {
-                        let e = i + S * (j + S * k);
-                        for (v, c) in lanes[e * L..(e + 1) * L].iter_mut().zip(row) {
-                            *v = c - iso;
-                        }
-                    }
-                }
-            }
-        } else {
-            // Lanes past `len` keep an earlier group's values, never read.
-            for (l, &i) in group[..len].iter().enumerate() {
-                support_minus_iso_lane::<S, L, T>(
-                    field,
-                    cell_at(lattice.cells, i),
-                    iso,
-                    l,
-                    &mut lanes,
-                );
-            }
-        }
+        supports_into_lanes::<S, L, T>(field, &corners[..len], iso, &mut lanes);
         bernstein_in_place::<S, L>(&mut lanes, &mut scratch, &m);
         let hulls = straddles_lanes::<L>(&lanes[..n * L], eps);
         for (l, &i) in group[..len].iter().enumerate() {
@@ -510,17 +479,50 @@ fn patches_in_lanes<const S: usize, const L: usize, T: Coefficient>(
     let (mut lanes, mut scratch) = (vec![0.0; n * L], vec![0.0; n * L]);
     let mut patch = vec![0.0; n];
     for (g, group) in cells.chunks(L).enumerate() {
-        // Lanes past the group's end keep an earlier group's values, never
-        // read.
-        for (l, &cell) in group.iter().enumerate() {
-            support_minus_iso_lane::<S, L, T>(field, cell, iso, l, &mut lanes);
-        }
+        supports_into_lanes::<S, L, T>(field, group, iso, &mut lanes);
         bernstein_in_place::<S, L>(&mut lanes, &mut scratch, &m);
         for l in 0..group.len() {
             for (p, v) in patch.iter_mut().zip(lanes.chunks_exact(L)) {
                 *p = v[l];
             }
             each(g * L + l, &patch);
+        }
+    }
+}
+
+/// `c - iso` over the supports of `group` (at most `L` cells) into `L`
+/// interleaved tensors (element `e` of lane `l` at `e·L + l`). Cubic rows
+/// are read as one vector per lane and transposed in registers; lanes past
+/// the group's end repeat its last cell (cubic) or keep earlier values
+/// (others), never read.
+#[inline(always)]
+fn supports_into_lanes<const S: usize, const L: usize, T: Coefficient>(
+    field: &Field<T>,
+    group: &[[i64; 3]],
+    iso: f64,
+    lanes: &mut [f64],
+) {
+    if S == 4 {
+        let base: [usize; L] =
+            std::array::from_fn(|l| field.support_offset(group[l.min(group.len() - 1)]));
+        let (data, sy, sz) = field.lane_rows::<S, L>(&base);
+        for k in 0..S {
+            for j in 0..S {
+                // SAFETY: every row of every lane lies inside `data`
+                // (checked by `lane_rows`), and `L` is the lane count
+                // `with_isa!` chose for this CPU.
+                let r = unsafe { crate::simd::gather_rows4::<T, L>(data, &base, j * sy + k * sz) };
+                for (i, row) in r.iter().enumerate() {
+                    let e = i + S * (j + S * k);
+                    for (v, c) in lanes[e * L..(e + 1) * L].iter_mut().zip(row) {
+                        *v = c - iso;
+                    }
+                }
+            }
+        }
+    } else {
+        for (l, &cell) in group.iter().enumerate() {
+            support_minus_iso_lane::<S, L, T>(field, cell, iso, l, lanes);
         }
     }
 }

@@ -117,7 +117,7 @@ fn round_up(x: f64) -> f32 {
 /// a support's rows fill vector lanes); exact, so the same on every one.
 pub fn hessian_bound<T: Coefficient>(field: &Field<T>, cell: [i64; 3]) -> [f64; 6] {
     crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
-        crate::with_support!(field.kernel().support(), S => hessian_bound_in::<S, T>(field, cell))
+        crate::with_support!(field.kernel().support(), S => cube_bound::<S, T>(field, cell))
     })
 }
 
@@ -145,7 +145,7 @@ pub fn neighbourhood_bound<T: Coefficient>(
         ($($s:literal => $w:literal),*) => {
             match field.kernel().support() {
                 $($s => crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
-                    cube_bound::<$s, $w, T>(field, corner)
+                    cube_bound::<$w, T>(field, corner)
                 }),)*
                 _ => neighbours_one_by_one(field, cell, cells),
             }
@@ -154,13 +154,13 @@ pub fn neighbourhood_bound<T: Coefficient>(
     cube!(3 => 5, 4 => 6, 5 => 7, 6 => 8, 7 => 9, 8 => 10)
 }
 
-/// [`support_bound`] of the `W = S + 2` coefficients a side that the
-/// supports of the 3³ cells from `corner` cover.
+/// [`support_bound`] of the cube of `W` coefficients a side from the first
+/// one of `corner`'s support: the support itself for `W = S` ([`hessian_bound`]),
+/// the supports of the 3³ cells from `corner` for `W = S + 2`
+/// ([`neighbourhood_bound`]). Fixed loop bounds: the builds run once per
+/// tagged cell, 380k of them on the teapot.
 #[inline(always)]
-fn cube_bound<const S: usize, const W: usize, T: Coefficient>(
-    field: &Field<T>,
-    corner: [i64; 3],
-) -> [f64; 6] {
+fn cube_bound<const W: usize, T: Coefficient>(field: &Field<T>, corner: [i64; 3]) -> [f64; 6] {
     let coeffs = field.coeffs();
     let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
     let base = field.support_offset(corner);
@@ -201,27 +201,6 @@ fn neighbours_one_by_one<T: Coefficient>(
         }
     }
     m
-}
-
-/// [`hessian_bound`] for support `S` (fixed loop bounds: the build runs once
-/// per tagged cell, 380k of them on the teapot).
-#[inline(always)]
-fn hessian_bound_in<const S: usize, T: Coefficient>(field: &Field<T>, cell: [i64; 3]) -> [f64; 6] {
-    let coeffs = field.coeffs();
-    let (sy, sz) = (coeffs.stride(1), coeffs.stride(2));
-    let base = field.support_offset(cell);
-    let data = coeffs.data();
-    // c[z][y][x] over the support.
-    let mut c = [[[0.0f64; S]; S]; S];
-    for (k, plane) in c.iter_mut().enumerate() {
-        for (j, row) in plane.iter_mut().enumerate() {
-            let src = &data[base + j * sy + k * sz..][..S];
-            for (x, v) in row.iter_mut().zip(src) {
-                *x = v.to_f64();
-            }
-        }
-    }
-    support_bound::<S>(&c)
 }
 
 /// [`hessian_bound`] of the support `c[z][y][x]`.

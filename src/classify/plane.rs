@@ -2,7 +2,7 @@
 //! solve stage can pass over the segments that stay clear of the
 //! iso-surface without restricting the field to them.
 //!
-//! Most segments the walk hands over hold no crossing (Table 2: 33–64% of
+//! Many segments the walk hands over hold no crossing (Table 2: 33–64% of
 //! the solves with Bézier tags, up to 71% with ACCC): the cell holds the
 //! surface, but the ray passes beside it. Over a cell `f - iso` is a
 //! tensor polynomial with Bernstein coefficients `b_ijk`; a plane
@@ -17,9 +17,10 @@
 //! ends (by more than a margin far above rounding) the segment holds no
 //! crossing — the solve would find none, so passing it over changes no
 //! output bit. Where the field is smooth on the scale of a cell, `e` is a
-//! small part of the field's change across it: on the glass sphere a
-//! segment passing a twentieth of a cell from the surface is proven empty,
-//! where the 4³ sub-cell masks see a quarter.
+//! small part of the field's change across it: on the glass sphere the
+//! planes pass over three quarters of the segments the 4³ sub-cell masks
+//! let through without a crossing (crossing-free solves 0.47 → 0.11 per
+//! ray, BENCHMARKS.md).
 //!
 //! The plane is the least-squares fit to the control points (any plane
 //! gives a valid `e`; this one keeps it small); kept as `f32`, with `e`
@@ -41,9 +42,10 @@ pub type PlaneBound = [f32; 6];
 
 /// What the walk tests a tagged cell's segment against: its sub-cell mask
 /// ([`super::SubCellMasks`]) and its plane, side by side in 32 bytes, so
-/// the plane's gathers find the line the mask's brought in (kept apart, the
-/// planes of the teapot's 378k tagged cells missed the cache: its traverse
-/// stage rose 19 ms CPU for 13 ms of solves saved).
+/// the plane's gathers read the line the mask's brought in. Measured, this
+/// did no better than the planes in a table of their own: the sphere's
+/// frames gained the same, and the teapot's walk still waited on its
+/// records (see [`CACHE_BUDGET`]).
 #[derive(Clone, Copy, Debug, Default)]
 #[repr(C, align(32))]
 pub struct CellTests {
@@ -58,7 +60,7 @@ pub struct CellTests {
 /// bound per crossing cell, and planes*): the glass sphere's 10,490
 /// records (0.3 MiB) cut its solves per ray 1.37 → 1.01 and its frame
 /// (distance, PRSS) 31.0 / 30.5 / 31.6 → 29.7 / 29.2 / 32.3 ms; the
-/// teapot's 378,692 (11.6 MiB) cut its solves 2.44 → 1.76 but raised its
+/// teapot's 356,477 (10.9 MiB) cut its solves 2.44 → 1.76 but raised its
 /// walk 66–76 → 95–97 ms CPU and its frame 93.4 / 99.8 → 100.3 / 101.6
 /// ms. 1 MiB is one core's L2 here.
 pub const CACHE_BUDGET: usize = 1 << 20;
@@ -139,13 +141,19 @@ impl PlaneBounds {
     /// anywhere proves nothing.
     #[inline(always)]
     pub fn clears(&self, p: &PlaneBound, u0: [f64; 3], u1: [f64; 3]) -> bool {
-        let at = |u: [f64; 3]| {
-            p[0] as f64 + p[1] as f64 * u[0] + p[2] as f64 * u[1] + p[3] as f64 * u[2]
-        };
-        let e = p[4] as f64 + self.margin;
-        let (l0, l1) = (at(u0), at(u1));
-        (l0 > e && l1 > e) || (l0 < -e && l1 < -e)
+        clears(p, self.margin, u0, u1)
     }
+}
+
+/// [`PlaneBounds::clears`] with the planes' `margin`, for lane code that
+/// holds the planes' slice rather than the table.
+#[inline(always)]
+pub fn clears(p: &PlaneBound, margin: f64, u0: [f64; 3], u1: [f64; 3]) -> bool {
+    let at =
+        |u: [f64; 3]| p[0] as f64 + p[1] as f64 * u[0] + p[2] as f64 * u[1] + p[3] as f64 * u[2];
+    let e = p[4] as f64 + margin;
+    let (l0, l1) = (at(u0), at(u1));
+    (l0 > e && l1 > e) || (l0 < -e && l1 < -e)
 }
 
 /// The least-squares plane through the control points `b` (`(d+1)³`, x
@@ -263,7 +271,7 @@ mod tests {
         let index = Arc::new(TaggedIndex::build(&tags));
         let masks = vec![u64::MAX; index.count()];
         let planes = PlaneBounds::build(&f, index, &masks, iso);
-        // Gradient ≈ 0.11 per voxel at the surface (sigma 3); the planes'
+        // Gradient ≈ 0.2 per voxel at the surface (sigma 3); the planes'
         // bounds are a small part of it.
         let worst = planes
             .tests

@@ -95,7 +95,7 @@ fn refract_runs<const S: usize, const L: usize, T: Coefficient>(
     let eta_entering = ctx.ior_outside / ctx.ior_inside;
     let eta_leaving = ctx.ior_inside / ctx.ior_outside;
     #[cfg(target_arch = "x86_64")]
-    let lanes = ctx.curvature.is_some_and(|b| wide::fits(ctx, b));
+    let lanes = ctx.curvature.is_some_and(wide::fits);
     #[cfg(not(target_arch = "x86_64"))]
     let lanes = false;
     for run in input.chunks(RUN) {

@@ -30,7 +30,7 @@ const LANES: usize = 8;
 /// Whether the lane clearing can run over `bounds`: the CPU has the lane
 /// walk's features ([`walk::available`]), and every slot of the index has
 /// its bound (it always does; the gathers rely on it).
-pub fn fits<T: Coefficient>(_ctx: &Ctx<T>, bounds: &CurvatureBounds) -> bool {
+pub fn fits(bounds: &CurvatureBounds) -> bool {
     let (index, table) = bounds.parts();
     walk::available() && table.len() == index.count()
 }
@@ -67,7 +67,7 @@ struct Clearings {
 /// Settles `checks` as [`super::clear_cells`] does.
 ///
 /// # Safety
-/// [`fits`] must be true for `ctx` and `bounds`, and each check's ray must
+/// [`fits`] must be true for `bounds`, and each check's ray must
 /// have been placed (its piece set) since it was made.
 #[target_feature(enable = "avx512f,avx512vl,avx512dq,avx512vpopcntdq,bmi2,popcnt")]
 pub unsafe fn clear_cells<T: Coefficient>(
@@ -396,7 +396,7 @@ mod tests {
             with_field!(&prep.field, f => {
                 let ctx = Ctx::new(&sc, &prep, f.as_ref());
                 let bounds = ctx.curvature.expect("bspline3 has curvature bounds");
-                assert!(fits(&ctx, bounds));
+                assert!(fits(bounds));
                 let bump = Bump::new();
                 let n = 4000;
                 let mut rays = Rays::with_capacity_in(n, false, &bump);

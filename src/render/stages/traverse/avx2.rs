@@ -34,7 +34,7 @@ use super::wide::{
     layout_fits, reads_block_map,
 };
 use crate::classify::bezier::SUB;
-use crate::classify::plane::CellTests;
+use crate::classify::plane::{self, CellTests};
 use crate::filter::coeffs::Coefficient;
 use crate::octree::distance::Proximity;
 use crate::octree::{OCCUPIED, Octree, TAGGED};
@@ -146,7 +146,7 @@ unsafe fn sel(m: __m256i, yes: __m256i, no: __m256i) -> __m256i {
 
 /// The lanes of bit set `m` whose cell's plane (at `slot`) proves the
 /// segment `t0..t1` clear of the surface, one lane at a time with
-/// [`crate::classify::PlaneBounds::clears`]'s operations.
+/// [`crate::classify::plane::clears`].
 #[inline(always)]
 unsafe fn plane_clears(
     (tests, margin): (&[CellTests], f64),
@@ -175,17 +175,10 @@ unsafe fn plane_clears(
         _mm256_storeu_si256(slots.as_mut_ptr() as *mut __m256i, slot);
         let mut clear = 0;
         for k in (0..4).filter(|&k| m >> k & 1 == 1) {
+            let local =
+                |t: f64| std::array::from_fn(|a| ou[a][k] + t * du[a][k] - cell[a][k] as f64);
             let p = &tests[slots[k] as usize].plane;
-            let at = |t: f64| {
-                let mut v = p[0] as f64;
-                for a in 0..3 {
-                    v += p[1 + a] as f64 * (ou[a][k] + t * du[a][k] - cell[a][k] as f64);
-                }
-                v
-            };
-            let e = p[4] as f64 + margin;
-            let (v0, v1) = (at(t0[k]), at(t1[k]));
-            if (v0 > e && v1 > e) || (v0 < -e && v1 < -e) {
+            if plane::clears(p, margin, local(t0[k]), local(t1[k])) {
                 clear |= 1 << k;
             }
         }
