@@ -7,6 +7,9 @@
 //! cargo bench --bench frame -- scenes/sphere.toml --set render.traversal=octree \
 //!     --set render.supersampling=prss --frames 20
 //! ```
+//!
+//! `--prepares N` also times `N` preparations from scratch (as a one-shot
+//! `snell render` does them) and prints the median of each step.
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -21,6 +24,7 @@ fn main() {
     let mut scene_path = PathBuf::from("scenes/sphere.toml");
     let mut sets = Vec::new();
     let mut frames = 10usize;
+    let mut prepares = 0usize;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -31,12 +35,21 @@ fn main() {
                     .and_then(|v| v.parse().ok())
                     .expect("--frames N")
             }
+            "--prepares" => {
+                prepares = args
+                    .next()
+                    .and_then(|v| v.parse().ok())
+                    .expect("--prepares N")
+            }
             "--bench" => {}
             s if s.ends_with(".toml") => scene_path = PathBuf::from(s),
             other => panic!("unknown argument {other}"),
         }
     }
     let scene = Scene::load(&scene_path, &sets).unwrap_or_else(|e| panic!("{e}"));
+    if prepares > 0 {
+        time_preparations(&scene, prepares);
+    }
     let t = Instant::now();
     let prep =
         Prepared::for_scene(&scene, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
@@ -65,4 +78,27 @@ fn main() {
         runs.len()
     );
     println!("{}", median.1.table());
+}
+
+/// Prepares `scene` from scratch `n` times and prints the median of the
+/// whole preparation and of each of its steps (ms).
+fn time_preparations(scene: &Scene, n: usize) {
+    let mut rows: Vec<[f64; 5]> = (0..n)
+        .map(|_| {
+            let t = Instant::now();
+            let p = Prepared::for_scene(scene, &LoadOptions::default())
+                .unwrap_or_else(|e| panic!("{e}"));
+            let wall = t.elapsed().as_secs_f64();
+            let s = &p.times;
+            [wall, s.load_s, s.prefilter_s, s.classify_s, s.octree_s].map(|v| v * 1e3)
+        })
+        .collect();
+    let names = ["prepare", "load", "prefilter", "classify", "octree"];
+    let medians: Vec<String> = (0..names.len())
+        .map(|i| {
+            rows.sort_by(|a, b| a[i].total_cmp(&b[i]));
+            format!("{} {:.2}", names[i], rows[n / 2][i])
+        })
+        .collect();
+    println!("preparation, median of {n} (ms): {}", medians.join(", "));
 }

@@ -353,7 +353,12 @@ fn peer_comparison() {
     assert_eq!(number(&j, "run.threads"), 2.0);
     let rows = j["rows"].as_array().unwrap();
     let count = |r: &str| rows.iter().filter(|x| x["renderer"] == r).count();
-    assert_eq!((count("snell"), count("povray")), (5, 4));
+    assert_eq!((count("snell"), count("povray")), (7, 4));
+    let labels: Vec<&str> = rows.iter().map(|r| r["label"].as_str().unwrap()).collect();
+    assert!(
+        labels.contains(&"octree+bezier bspline2") && labels.contains(&"distance+bezier bspline2"),
+        "{labels:?}"
+    );
     for r in rows {
         let label = r["label"].as_str().unwrap();
         for k in ["render_ms.median", "frame_ms.median", "process_ms.median"] {
@@ -377,7 +382,7 @@ fn peer_comparison() {
         }
     }
     let ratios = j["ratios"].as_array().unwrap();
-    assert_eq!(ratios.len(), 5);
+    assert_eq!(ratios.len(), 7);
     assert!(ratios.iter().all(|x| number(x, "frame") > 0.0));
     // POV-Ray and snell's identical interpolant give the same surface.
     for x in j["same_interpolant"].as_array().unwrap() {

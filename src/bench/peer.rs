@@ -6,7 +6,9 @@
 //! default classification) and five filters: `linear` and `catmull-rom` are
 //! exactly POV-Ray's `interpolate 1` and `interpolate 2` interpolants,
 //! `bspline2` is the cheapest B-spline, `bspline3` the scene's filter and
-//! `smooth-bspline3` (λ = 1) the most accurate. POV-Ray renders it through
+//! `smooth-bspline3` (λ = 1) the most accurate; `bspline2` and `bspline3`
+//! also with the octant distance maps in place of the octree (`distance`,
+//! [`crate::octree::distance`]). POV-Ray renders it through
 //! [`crate::peer::povray`]'s export
 //! (`isosurface` over the `density_file df3`, its fastest correct settings:
 //! `max_gradient` from the data, `max_trace 1`, a tight `contained_by`,
@@ -20,8 +22,8 @@
 //! alike:
 //! - **render**: snell's tile loop and film (`Frame.stats.wall`); POV-Ray's
 //!   own `Trace Time`.
-//! - **prepare**: snell's load, prefilter, classification and octree, built
-//!   anew for every run; POV-Ray's parse and bounding time (it reads the DF3
+//! - **prepare**: snell's load, prefilter, classification and octree (and
+//!   the distance maps, for those rows), built anew for every run; POV-Ray's parse and bounding time (it reads the DF3
 //!   while parsing and precomputes nothing else).
 //! - **frame** = prepare + render, the in-process time from a scene file to
 //!   an image, the fair per-frame comparison.
@@ -78,13 +80,18 @@ pub const POV_CAREFUL_ACCURACY: f64 = 1e-4;
 /// isosurface, at lower error.
 pub const GOAL_SPEEDUP: f64 = 25.0;
 
-/// snell's filters in the comparison (`smooth-bspline3` with λ = 1).
-const SNELL_FILTERS: [&str; 5] = [
-    "linear",
-    "catmull-rom",
-    "bspline2",
-    "bspline3",
-    "smooth-bspline3",
+/// snell's rows: traversal and filter (`smooth-bspline3` with λ = 1). Every
+/// filter with the octree (the scenes' default traversal), and the two
+/// fastest filters with the octant distance maps too, which a single frame
+/// of this small sphere prepares and renders faster.
+const SNELL_ROWS: [(&str, &str); 7] = [
+    ("octree", "linear"),
+    ("octree", "catmull-rom"),
+    ("octree", "bspline2"),
+    ("octree", "bspline3"),
+    ("octree", "smooth-bspline3"),
+    ("distance", "bspline2"),
+    ("distance", "bspline3"),
 ];
 
 /// POV-Ray's rows: interpolation and accuracy.
@@ -296,7 +303,7 @@ pub fn peer_bench(
         .render(&base);
     let checker = base.checker_size();
     // Progress counts the timed runs.
-    observer.begin((SNELL_FILTERS.len() + POV_ROWS.len()) * opts.repeats);
+    observer.begin((SNELL_ROWS.len() + POV_ROWS.len()) * opts.repeats);
 
     // Every row is set up (and warmed up) first; then the timed runs go
     // round-robin, one run of each row per round, so that every row's
@@ -305,15 +312,15 @@ pub fn peer_bench(
     // one bspline3 row to POV-Ray's swung from 18.5x to 24.1x between two
     // runs minutes apart.
     let mut snells = Vec::new();
-    for f in SNELL_FILTERS {
+    for (traversal, f) in SNELL_ROWS {
         let mut overrides = size.to_vec();
-        overrides.push("render.traversal=octree".into());
+        overrides.push(format!("render.traversal={traversal}"));
         overrides.push(format!("surface.filter={f}"));
         if f == "smooth-bspline3" {
             overrides.push("surface.lambda=1".into());
         }
         let label = format!(
-            "octree+bezier {}",
+            "{traversal}+bezier {}",
             if f == "smooth-bspline3" {
                 "smooth-bspline3 λ=1"
             } else {
@@ -912,7 +919,7 @@ reported — whole run {}{}.\n\n",
     let _ = write!(
         s,
         "\nframe = prepare + render, in-process: snell's prepare is load, prefilter, \
-classification and octree (built anew every run), its render the tile loop and film; POV-Ray's \
+classification and octree (and the distance maps for the distance rows; built anew every run), its render the tile loop and film; POV-Ray's \
 prepare is its parse and bounding time (it reads the DF3 while parsing and precomputes nothing \
 else), its render its own `Trace Time`. process = the whole `snell render` or `povray` process, \
 start to exit (start-up, PNG writing included). Errors: hit-position distance in checker squares \

@@ -57,6 +57,27 @@ impl Tags {
         self.count
     }
 
+    /// The tags of cells `start..start + out.len()` (linear indices, which
+    /// must be in range) as bytes, 1 where tagged: a word's worth at a time,
+    /// for loops that consume whole rows.
+    #[inline(always)]
+    pub fn bytes_into(&self, start: usize, out: &mut [u8]) {
+        let mut i = start;
+        for chunk in out.chunks_mut(64) {
+            let (w, s) = (i >> 6, i & 63);
+            let mut bits = self.words[w] >> s;
+            if s != 0
+                && let Some(next) = self.words.get(w + 1)
+            {
+                bits |= next << (64 - s);
+            }
+            for (k, o) in chunk.iter_mut().enumerate() {
+                *o = (bits >> k) as u8 & 1;
+            }
+            i += chunk.len();
+        }
+    }
+
     #[inline(always)]
     pub fn get_index(&self, i: usize) -> bool {
         (self.words[i >> 6] >> (i & 63)) & 1 != 0
@@ -175,5 +196,22 @@ mod tests {
         let w = Tags::from_words([3, 2, 2], a.words().to_vec()).unwrap();
         assert_eq!(w, a);
         assert!(Tags::from_words([3, 2, 2], vec![u64::MAX]).is_none());
+    }
+
+    #[test]
+    fn row_bytes_are_the_tags() {
+        // Every start and length, across word boundaries and to the end.
+        let cells = [13usize, 11, 2];
+        let n = 13 * 11 * 2;
+        let flags: Vec<u8> = (0..n).map(|i| ((i * 7919) % 5 == 0) as u8).collect();
+        let t = Tags::from_chunks(cells, vec![flags.clone()]);
+        for start in 0..n {
+            for len in [0, 1, 13, 63, 64, 65, 130, n - start] {
+                let len = len.min(n - start);
+                let mut out = vec![9u8; len];
+                t.bytes_into(start, &mut out);
+                assert_eq!(out, flags[start..start + len], "start {start} len {len}");
+            }
+        }
     }
 }

@@ -184,7 +184,8 @@ fn to_bricked(cells: [usize; 3], linear: &[u8], out: &mut [u8]) {
 /// anchored at its seven neighbours ahead, so `D(c) = 1 + min D(c + e)` over
 /// those neighbours (0 when tagged). Sweeping from the far corner, the six
 /// neighbours in the next row or slab are already final and combine as a
-/// vector along the row; only the neighbour ahead in the row is a scan.
+/// vector along the row; only the neighbour ahead in the row is a recurrence,
+/// solved in whole-row vector passes ([`row_reach`]).
 ///
 /// The sweep keeps two slabs of `D` (the one it fills and the one ahead)
 /// and files each finished row into the bricked map: a whole lattice of
@@ -214,11 +215,12 @@ fn octant_map(tags: &Tags, o: usize, out: &mut [u8]) {
     };
     // The slab being filled and the one ahead of it, rows of `nx`.
     let (mut slab, mut ahead_slab) = (vec![0u8; nx * ny], vec![0u8; nx * ny]);
-    // G(x): the three final neighbours at the same x; F(x) = min(G(x),
-    // G(x ahead)), the six of them; the row's tags as bytes.
+    // G(x): the three final neighbours at the same x; E(x): 1 + the six
+    // of them (0 where tagged); the row's tags as bytes; scratch.
     let mut g = vec![255u8; nx];
-    let mut f = vec![255u8; nx];
+    let mut e = vec![0u8; nx];
     let mut tagged = vec![0u8; nx];
+    let mut scratch = vec![0u8; nx];
     for &z in &order(nz, neg[2]) {
         let za = ahead(z, nz, neg[2]);
         for &y in &order(ny, neg[1]) {
@@ -238,47 +240,71 @@ fn octant_map(tags: &Tags, o: usize, out: &mut [u8]) {
                     take(&ahead_slab[nx * ya..][..nx]);
                 }
             }
-            let base = nx * (y + ny * z);
-            for (x, t) in tagged.iter_mut().enumerate() {
-                *t = tags.get_index(base + x) as u8;
+            tags.bytes_into(nx * (y + ny * z), &mut tagged);
+            // F(x) = min(G(x), G(x ahead)); E(x) = 1 + F(x), or 0 where
+            // tagged (`t` is 0 or 1: all ones keeps the value, all zeros
+            // clears it).
+            let keep = |f: u8, t: u8| f.saturating_add(1) & t.wrapping_sub(1);
+            if neg[0] {
+                e[0] = keep(g[0], tagged[0]);
+                for x in 1..nx {
+                    e[x] = keep(g[x].min(g[x - 1]), tagged[x]);
+                }
+            } else {
+                e[nx - 1] = keep(g[nx - 1], tagged[nx - 1]);
+                for x in 0..nx - 1 {
+                    e[x] = keep(g[x].min(g[x + 1]), tagged[x]);
+                }
             }
             let row = &mut slab[nx * y..][..nx];
-            // The row scan, from the cell ahead: D(x) = 1 + min(F(x), D(x
-            // ahead)), 0 where tagged.
-            if neg[0] {
-                f[0] = g[0];
-                for x in 1..nx {
-                    f[x] = g[x].min(g[x - 1]);
-                }
-                scan(f.iter().zip(&tagged).zip(row.iter_mut()));
-            } else {
-                f[nx - 1] = g[nx - 1];
-                for x in 0..nx - 1 {
-                    f[x] = g[x].min(g[x + 1]);
-                }
-                scan(f.iter().zip(&tagged).zip(row.iter_mut()).rev());
+            row_reach(&mut e, &mut scratch, neg[0]);
+            row.copy_from_slice(&e);
+            // A brick's rows of 4 cells are contiguous in both layouts, and
+            // bricks along x are 64 slots apart.
+            // (Fixed-size copies: a slice's length would call `memmove`.)
+            let first = bricked.index([0, y as i64, z as i64]);
+            let mut runs = row.chunks_exact(4);
+            for (x0, run) in runs.by_ref().enumerate() {
+                let at = first + 64 * x0;
+                out[at..at + 4].copy_from_slice(run);
             }
-            // A brick's rows of 4 cells are contiguous in both layouts.
-            for (x0, run) in row.chunks(4).enumerate() {
-                let at = bricked.index([4 * x0 as i64, y as i64, z as i64]);
-                out[at..at + run.len()].copy_from_slice(run);
+            let rest = runs.remainder();
+            if !rest.is_empty() {
+                let at = first + 64 * (nx / 4);
+                out[at..at + rest.len()].copy_from_slice(rest);
             }
         }
         std::mem::swap(&mut slab, &mut ahead_slab);
     }
 }
 
-/// [`octant_map`]'s row scan over `(F(x), tagged(x))` pairs in the scan's
-/// order, writing `D(x)`: branch-free, a chain of a minimum, an add and a
-/// select per cell.
-#[inline(always)]
-fn scan<'a>(cells: impl Iterator<Item = ((&'a u8, &'a u8), &'a mut u8)>) {
-    let mut last = 255u8;
-    for ((&f, &t), out) in cells {
-        let v = f.min(last).saturating_add(1);
-        // `t` is 0 or 1: all ones keeps `v`, all zeros clears it.
-        last = v & t.wrapping_sub(1);
-        *out = last;
+/// Solves a row's recurrence `D(x) = min(E(x), D(x ahead) + 1)` (saturating
+/// at 255, which past the row's end is) in place of `E`: `D(x)` is the
+/// least `E(x + j) + j` over the cells `j` ahead, and passes with offsets 1,
+/// 2, 4, … each double the reach — whole-row minimums and saturating adds
+/// the compiler puts in vector lanes, where the cell-by-cell recurrence was a
+/// chain of three dependent instructions per cell. `ahead_is_lower`: the
+/// cell ahead is at `x - 1` (else `x + 1`).
+fn row_reach(d: &mut Vec<u8>, scratch: &mut Vec<u8>, ahead_is_lower: bool) {
+    let n = d.len();
+    let mut k = 1usize;
+    // Offsets past 255 cannot lower a saturated sum.
+    while k < n.min(256) {
+        let step = k as u8;
+        let (src, dst) = (&d[..], &mut scratch[..]);
+        if ahead_is_lower {
+            dst[..k].copy_from_slice(&src[..k]);
+            for ((o, &here), &there) in dst[k..].iter_mut().zip(&src[k..]).zip(src) {
+                *o = here.min(there.saturating_add(step));
+            }
+        } else {
+            dst[n - k..].copy_from_slice(&src[n - k..]);
+            for ((o, &here), &there) in dst.iter_mut().zip(src).zip(&src[k..]) {
+                *o = here.min(there.saturating_add(step));
+            }
+        }
+        std::mem::swap(d, scratch);
+        k *= 2;
     }
 }
 
@@ -387,7 +413,14 @@ mod tests {
     fn octant_cubes_match_brute_force() {
         // A tagged cell at chessboard distance m ahead of c (in c's octant)
         // bounds the anchored cube's edge to m; the largest is the nearest.
-        for (cells, per_mille) in [([9usize, 7, 8], 20), ([13, 5, 6], 4), ([3, 4, 2], 0)] {
+        // Rows past 256 cells reach the maps' saturation inside a row.
+        for (cells, per_mille) in [
+            ([9usize, 7, 8], 20),
+            ([13, 5, 6], 4),
+            ([3, 4, 2], 0),
+            ([1, 3, 2], 100),
+            ([300, 3, 2], 3),
+        ] {
             let (tags, on) = random_tags(cells, per_mille);
             let p = Proximity::build(&tags);
             assert!(p.is_octant());
