@@ -7,7 +7,7 @@
 //!
 //! | method | bound over a cell | cost |
 //! |---|---|---|
-//! | `bmcc` | coefficients of the support on both sides of the iso-value (Thévenaz & Unser 2003) | separable OR windows |
+//! | `bmcc` | coefficients of the support on both sides of the iso-value (Thévenaz & Unser 2003) | separable OR windows over words of sign bits |
 //! | `accc` | the paper's eq. (1): per-coefficient max/min weights over the cell | separable dot products |
 //! | `accc2`, `accc4`, `accc8` | eq. (1) per 2³ / 4³ / 8³ sub-cell (the paper's proposed refinement), the straddling sub-cells kept as a 4³ mask | per tagged cell, separable for non-negative kernels |
 //! | `bezier` | convex hull of the cell's tensor Bernstein (Bézier) coefficients, refined by de Casteljau subdivision | per tagged cell |
@@ -19,6 +19,7 @@
 
 pub mod accc_sub;
 pub mod bezier;
+mod bmcc;
 pub mod bound;
 #[cfg(target_arch = "x86_64")]
 mod cubic_mask;
@@ -230,13 +231,7 @@ pub fn bmcc<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Ta
     if !field.kernel().is_nonnegative() {
         return lebesgue_range(field, lattice, iso);
     }
-    separable::per_cell(
-        field,
-        lattice,
-        |c| [(c > iso) as u8, (c <= iso) as u8],
-        |w| w.iter().fold([0u8; 2], |a, b| [a[0] | b[0], a[1] | b[1]]),
-        |v| v[0] != 0 && v[1] != 0,
-    )
+    bmcc::bmcc_bits(field, lattice, iso)
 }
 
 /// The paper's equation (1), separably: upper and lower bounds of `f - iso`

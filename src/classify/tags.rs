@@ -34,6 +34,46 @@ impl Tags {
         }
     }
 
+    /// Packs rows of cells (x fastest), each given as `⌈nx/64⌉` words whose
+    /// first `nx` bits are the row's tags (bits past them are ignored), the
+    /// rows in order in consecutive chunks.
+    pub fn from_row_words(cells: [usize; 3], chunks: impl IntoIterator<Item = Vec<u64>>) -> Tags {
+        let n = cells.iter().product::<usize>();
+        let nx = cells[0];
+        let mut words = vec![0u64; n.div_ceil(64)];
+        let (mut i, mut count) = (0usize, 0usize);
+        for chunk in chunks {
+            if nx == 0 {
+                continue;
+            }
+            for row in chunk.chunks_exact(nx.div_ceil(64)) {
+                let mut left = nx;
+                for &word in row {
+                    let take = left.min(64);
+                    let word = if take < 64 {
+                        word & ((1u64 << take) - 1)
+                    } else {
+                        word
+                    };
+                    count += word.count_ones() as usize;
+                    let (q, r) = (i >> 6, i & 63);
+                    words[q] |= word << r;
+                    if r != 0 && r + take > 64 {
+                        words[q + 1] |= word >> (64 - r);
+                    }
+                    i += take;
+                    left -= take;
+                }
+            }
+        }
+        assert_eq!(i, n, "rows must cover every cell once");
+        Tags {
+            cells,
+            words,
+            count,
+        }
+    }
+
     /// No cell tagged.
     pub fn empty(cells: [usize; 3]) -> Tags {
         let n = cells.iter().product::<usize>();
