@@ -23,8 +23,9 @@
 //! - **render**: snell's tile loop and film (`Frame.stats.wall`); POV-Ray's
 //!   own `Trace Time`.
 //! - **prepare**: snell's load, prefilter, classification and octree (and
-//!   the distance maps, for those rows), built anew for every run; POV-Ray's parse and bounding time (it reads the DF3
-//!   while parsing and precomputes nothing else).
+//!   the distance maps, for those rows), built anew for every run;
+//!   POV-Ray's parse and bounding time (it reads the DF3 while parsing and
+//!   precomputes nothing else).
 //! - **frame** = prepare + render, the in-process time from a scene file to
 //!   an image, the fair per-frame comparison.
 //! - **process**: the whole `snell render` or `povray` process, start to exit

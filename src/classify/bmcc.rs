@@ -4,8 +4,9 @@
 //!
 //! The same tags as the separable byte windows of [`super::separable`] (a
 //! test holds them together), 64 cells per operation instead of one: the
-//! windows were half of the Bézier-hull classification of a 256³ sphere
-//! (BMCC 65.6 ms of 133 ms, `snell classify`), which it refines.
+//! byte windows were half of the Bézier-hull classification of a 256³
+//! sphere, whose candidates they are (BMCC 53–57 ms of 104–111 ms, `snell
+//! classify`; in words 17–20 ms, BENCHMARKS.md).
 
 use rayon::prelude::*;
 
@@ -19,7 +20,7 @@ const CHUNK_BYTES: usize = 16 << 20;
 
 /// Cells whose support holds coefficients both above `iso` and at or below
 /// it (a NaN coefficient is neither). Only a bound for non-negative kernels;
-/// [`super::bmcc`] decides which to use.
+/// [`super::bmcc()`] decides which to use.
 pub(super) fn bmcc_bits<T: Coefficient>(field: &Field<T>, lattice: &Lattice, iso: f64) -> Tags {
     if lattice.cell_count() == 0 {
         return Tags::empty(lattice.cells);

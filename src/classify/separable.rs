@@ -6,8 +6,9 @@
 //! `k0 .. k0+S-1` with `k0 = cell - (S-1)/2`, and coefficient `k0 + j` carries
 //! weight `W_j`. ACCC folds a window with dot products against per-axis
 //! weight bounds (BMCC, an OR of sign flags, runs on words of bits in
-//! [`super::bmcc`], and is tested against this). The volume is processed in chunks of z-slabs in
-//! parallel, so memory stays a few slabs per thread whatever the volume size.
+//! [`mod@super::bmcc`], and is tested against this). The volume is processed in
+//! chunks of z-slabs in parallel, so memory stays a few slabs per thread
+//! whatever the volume size.
 
 use rayon::prelude::*;
 

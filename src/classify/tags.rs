@@ -36,7 +36,8 @@ impl Tags {
 
     /// Packs rows of cells (x fastest), each given as `⌈nx/64⌉` words whose
     /// first `nx` bits are the row's tags (bits past them are ignored), the
-    /// rows in order in consecutive chunks.
+    /// rows in order in consecutive chunks: [`Tags::from_chunks`] for
+    /// producers that work on words of bits.
     pub fn from_row_words(cells: [usize; 3], chunks: impl IntoIterator<Item = Vec<u64>>) -> Tags {
         let n = cells.iter().product::<usize>();
         let nx = cells[0];
@@ -100,7 +101,7 @@ impl Tags {
     /// The tags of cells `start..start + out.len()` (linear indices, which
     /// must be in range) as bytes, 1 where tagged: a word's worth at a time,
     /// for loops that consume whole rows.
-    #[inline(always)]
+    #[inline]
     pub fn bytes_into(&self, start: usize, out: &mut [u8]) {
         let mut i = start;
         for chunk in out.chunks_mut(64) {
