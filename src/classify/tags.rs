@@ -39,35 +39,7 @@ impl Tags {
     /// rows in order in consecutive chunks: [`Tags::from_chunks`] for
     /// producers that work on words of bits.
     pub fn from_row_words(cells: [usize; 3], chunks: impl IntoIterator<Item = Vec<u64>>) -> Tags {
-        let n = cells.iter().product::<usize>();
-        let nx = cells[0];
-        let mut words = vec![0u64; n.div_ceil(64)];
-        let (mut i, mut count) = (0usize, 0usize);
-        for chunk in chunks {
-            if nx == 0 {
-                continue;
-            }
-            for row in chunk.chunks_exact(nx.div_ceil(64)) {
-                let mut left = nx;
-                for &word in row {
-                    let take = left.min(64);
-                    let word = if take < 64 {
-                        word & ((1u64 << take) - 1)
-                    } else {
-                        word
-                    };
-                    count += word.count_ones() as usize;
-                    let (q, r) = (i >> 6, i & 63);
-                    words[q] |= word << r;
-                    if r != 0 && r + take > 64 {
-                        words[q + 1] |= word >> (64 - r);
-                    }
-                    i += take;
-                    left -= take;
-                }
-            }
-        }
-        assert_eq!(i, n, "rows must cover every cell once");
+        let (words, count) = pack_rows(cells, chunks);
         Tags {
             cells,
             words,
@@ -215,6 +187,71 @@ impl Tags {
 
     pub fn bytes(&self) -> usize {
         self.words.len() * 8
+    }
+}
+
+/// Linear bits (x fastest) over `cells` from rows of `⌈nx/64⌉` words each
+/// (the first `nx` bits of a row are its cells; bits past them are
+/// ignored), the rows in order in consecutive chunks; and how many are set.
+pub(crate) fn pack_rows(
+    cells: [usize; 3],
+    chunks: impl IntoIterator<Item = Vec<u64>>,
+) -> (Vec<u64>, usize) {
+    let n = cells.iter().product::<usize>();
+    let nx = cells[0];
+    let mut words = vec![0u64; n.div_ceil(64)];
+    let (mut i, mut count) = (0usize, 0usize);
+    for chunk in chunks {
+        if nx == 0 {
+            continue;
+        }
+        for row in chunk.chunks_exact(nx.div_ceil(64)) {
+            let mut left = nx;
+            for &word in row {
+                let take = left.min(64);
+                let word = if take < 64 {
+                    word & ((1u64 << take) - 1)
+                } else {
+                    word
+                };
+                count += word.count_ones() as usize;
+                let (q, r) = (i >> 6, i & 63);
+                words[q] |= word << r;
+                if r != 0 && r + take > 64 {
+                    words[q + 1] |= word >> (64 - r);
+                }
+                i += take;
+                left -= take;
+            }
+        }
+    }
+    assert_eq!(i, n, "rows must cover every cell once");
+    (words, count)
+}
+
+/// Bits `start .. start + len` of the linear bits `words` (which must hold
+/// them) into `out` from bit 0, zero past `len` (`out` may be longer).
+#[inline]
+pub(crate) fn row_bits(words: &[u64], start: usize, len: usize, out: &mut [u64]) {
+    for (k, o) in out.iter_mut().enumerate() {
+        let take = len.saturating_sub(64 * k).min(64);
+        if take == 0 {
+            *o = 0;
+            continue;
+        }
+        let i = start + 64 * k;
+        let (w, s) = (i >> 6, i & 63);
+        let mut bits = words[w] >> s;
+        if s != 0
+            && let Some(next) = words.get(w + 1)
+        {
+            bits |= next << (64 - s);
+        }
+        *o = if take < 64 {
+            bits & ((1u64 << take) - 1)
+        } else {
+            bits
+        };
     }
 }
 

@@ -35,53 +35,58 @@ impl Level {
         (self.words[i >> 6] >> (i & 63)) & 1 != 0
     }
 
-    /// Parent level: a block is occupied if any of its 2³ children is.
-    fn coarsen(&self, occupied: impl Fn([usize; 3]) -> bool + Sync) -> Level {
-        let dims = self.dims.map(|n| n.div_ceil(2));
-        let slab = dims[0] * dims[1];
-        let flags: Vec<Vec<u8>> = (0..dims[2])
+    /// Parent level of the occupancy bits `words` (linear, x fastest) over
+    /// `dims`: a block is occupied if any of its 2³ children is. A word at a
+    /// time: the OR of a block row's (up to) four child rows, of each bit
+    /// pair along x, and the pairs' even bits gathered into the parent row.
+    fn coarsen(dims: [usize; 3], words: &[u64]) -> Level {
+        let parent = dims.map(|n| n.div_ceil(2));
+        let wc = parent[0].div_ceil(64);
+        let wf = dims[0].div_ceil(64);
+        let rows: Vec<Vec<u64>> = (0..parent[2])
             .into_par_iter()
             .map(|z| {
-                let mut out = vec![0u8; slab];
-                for y in 0..dims[1] {
-                    for x in 0..dims[0] {
-                        let mut any = false;
-                        for dz in 0..2 {
-                            for dy in 0..2 {
-                                for dx in 0..2 {
-                                    let c = [2 * x + dx, 2 * y + dy, 2 * z + dz];
-                                    if c[0] < self.dims[0]
-                                        && c[1] < self.dims[1]
-                                        && c[2] < self.dims[2]
-                                    {
-                                        any |= occupied(c);
-                                    }
-                                }
+                let mut out = vec![0u64; parent[1] * wc];
+                // Two parent words take four child words (`2·wc ≥ wf`).
+                let mut any = vec![0u64; 2 * wc];
+                let mut child = vec![0u64; wf];
+                for y in 0..parent[1] {
+                    any.fill(0);
+                    for cz in (2 * z..2 * z + 2).filter(|&c| c < dims[2]) {
+                        for cy in (2 * y..2 * y + 2).filter(|&c| c < dims[1]) {
+                            let start = dims[0] * (cy + dims[1] * cz);
+                            crate::classify::tags::row_bits(words, start, dims[0], &mut child);
+                            for (a, c) in any.iter_mut().zip(&child) {
+                                *a |= c;
                             }
                         }
-                        out[x + dims[0] * y] = any as u8;
+                    }
+                    for (j, o) in out[y * wc..][..wc].iter_mut().enumerate() {
+                        let lo = even_bits(any[2 * j] | any[2 * j] >> 1);
+                        let hi = even_bits(any[2 * j + 1] | any[2 * j + 1] >> 1);
+                        *o = lo | hi << 32;
                     }
                 }
                 out
             })
             .collect();
-        Level::from_flags(dims, flags)
-    }
-
-    fn from_flags(dims: [usize; 3], flags: Vec<Vec<u8>>) -> Level {
-        let n = dims.iter().product::<usize>();
-        let mut words = vec![0u64; n.div_ceil(64)];
-        let mut i = 0;
-        for chunk in flags {
-            for f in chunk {
-                if f != 0 {
-                    words[i >> 6] |= 1 << (i & 63);
-                }
-                i += 1;
-            }
+        let (words, _) = crate::classify::tags::pack_rows(parent, rows);
+        Level {
+            dims: parent,
+            words,
         }
-        Level { dims, words }
     }
+}
+
+/// Bits 0, 2, 4, … 62 of `x` as bits 0 … 31.
+#[inline(always)]
+fn even_bits(x: u64) -> u64 {
+    let mut x = x & 0x5555_5555_5555_5555;
+    x = (x | x >> 1) & 0x3333_3333_3333_3333;
+    x = (x | x >> 2) & 0x0f0f_0f0f_0f0f_0f0f;
+    x = (x | x >> 4) & 0x00ff_00ff_00ff_00ff;
+    x = (x | x >> 8) & 0x0000_ffff_0000_ffff;
+    (x | x >> 16) & 0x0000_0000_ffff_ffff
 }
 
 /// Occupancy pyramid over cell tags, flattened for traversal.
@@ -113,15 +118,8 @@ impl Octree {
         let mut dims = tags.cells;
         while dims.iter().any(|&d| d > 1) {
             let next = match levels.last() {
-                None => {
-                    let base = Level {
-                        dims,
-                        words: Vec::new(),
-                    };
-                    let t = &tags;
-                    base.coarsen(|c| t.get([c[0] as i64, c[1] as i64, c[2] as i64]))
-                }
-                Some(prev) => prev.coarsen(|c| prev.get(c)),
+                None => Level::coarsen(dims, tags.words()),
+                Some(prev) => Level::coarsen(prev.dims, &prev.words),
             };
             dims = next.dims;
             levels.push(next);
@@ -481,5 +479,74 @@ mod tests {
             }
         }
         assert!(checked.iter().all(|&k| k > 100), "{checked:?}");
+    }
+
+    /// Every level's bits are the OR of its 2³ children, checked cell by
+    /// cell against the level below, on lattices whose rows end inside a
+    /// word, fill one or two exactly, or span several, with odd extents.
+    #[test]
+    fn levels_are_the_or_of_their_children() {
+        for (cells, seed) in [
+            ([13usize, 9, 5], 1u64),
+            ([64, 3, 3], 2),
+            ([128, 2, 5], 3),
+            ([129, 5, 2], 4),
+            ([300, 3, 3], 5),
+            ([1, 1, 1], 6),
+            ([1, 7, 3], 7),
+        ] {
+            for density in [0.0, 0.003, 0.05, 0.6] {
+                let n: usize = cells.iter().product();
+                let on: Vec<[usize; 3]> = (0..n)
+                    .filter(|&k| crate::phantom::uniform(seed, k as u64) < density)
+                    .map(|k| {
+                        [
+                            k % cells[0],
+                            k / cells[0] % cells[1],
+                            k / (cells[0] * cells[1]),
+                        ]
+                    })
+                    .collect();
+                let o = Octree::build(tags_with(cells, &on));
+                let below = |c: [usize; 3], l: usize| -> bool {
+                    if l == 0 {
+                        o.tags.get(c.map(|v| v as i64))
+                    } else {
+                        o.levels[l - 1].get(c)
+                    }
+                };
+                let mut fine = cells;
+                for (l, level) in o.levels.iter().enumerate() {
+                    assert_eq!(level.dims, fine.map(|v| v.div_ceil(2)));
+                    let [px, py, pz] = level.dims;
+                    for z in 0..pz {
+                        for y in 0..py {
+                            for x in 0..px {
+                                let mut want = false;
+                                for d in 0..8 {
+                                    let c =
+                                        [2 * x + (d & 1), 2 * y + (d >> 1 & 1), 2 * z + (d >> 2)];
+                                    if (0..3).all(|a| c[a] < fine[a]) {
+                                        want |= below(c, l);
+                                    }
+                                }
+                                assert_eq!(
+                                    level.get([x, y, z]),
+                                    want,
+                                    "{cells:?} level {} {x},{y},{z}",
+                                    l + 1
+                                );
+                            }
+                        }
+                    }
+                    // Nothing set past the level's cells.
+                    let bits = level.dims.iter().product::<usize>();
+                    if bits % 64 != 0 {
+                        assert_eq!(level.words.last().unwrap() >> (bits % 64), 0);
+                    }
+                    fine = level.dims;
+                }
+            }
+        }
     }
 }
