@@ -30,16 +30,7 @@ impl TaggedIndex {
 
     pub fn build(tags: &Tags) -> TaggedIndex {
         let bricked = Bricked::new(tags.cells);
-        let mut words = vec![0u64; bricked.len() / 64];
-        words.par_iter_mut().enumerate().for_each(|(brick, w)| {
-            let origin = bricked.brick_origin(brick);
-            for k in 0..64 {
-                let c = Bricked::cell_in(origin, k);
-                if (0..3).all(|a| c[a] < tags.cells[a]) && tags.get(c.map(|v| v as i64)) {
-                    *w |= 1 << k;
-                }
-            }
-        });
+        let words = tags.brick_words(&bricked);
         let mut rank = Vec::with_capacity(words.len());
         let mut acc = 0u32;
         for w in &words {

@@ -1,6 +1,6 @@
 //! One bit per knot cell: "may hold the iso-surface".
 
-use crate::lattice::Lattice;
+use crate::lattice::{Bricked, Lattice};
 
 /// A bitset over the cells of a lattice (x fastest).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -89,6 +89,37 @@ impl Tags {
             }
             i += chunk.len();
         }
+    }
+
+    /// The tags in the bricked layout: per 4³ brick of `bricked` (made for
+    /// these cells) one word, bit `k` the brick's cell `k`
+    /// ([`Bricked::cell_in`]; 0 past the lattice). Each row's tags are read
+    /// a word at a time and filed four cells (one brick row) at a time.
+    pub fn brick_words(&self, bricked: &Bricked) -> Vec<u64> {
+        use rayon::prelude::*;
+        let [nx, ny, nz] = self.cells;
+        let [bx, by, _] = bricked.bricks();
+        let mut out = vec![0u64; bricked.len() / 64];
+        if nx == 0 {
+            return out;
+        }
+        out.par_chunks_mut(bx * by).enumerate().for_each_init(
+            || vec![0u64; nx.div_ceil(64)],
+            |row, (zb, slab)| {
+                for z in 4 * zb..(4 * zb + 4).min(nz) {
+                    for y in 0..ny {
+                        row_bits(&self.words, nx * (y + ny * z), nx, row);
+                        let at = (y & 3) * 4 + (z & 3) * 16;
+                        let bricks = &mut slab[(y >> 2) * bx..][..bx];
+                        for (xb, w) in bricks.iter_mut().enumerate() {
+                            let nibble = row[xb >> 4] >> (4 * (xb & 15)) & 0xf;
+                            *w |= nibble << at;
+                        }
+                    }
+                }
+            },
+        );
+        out
     }
 
     #[inline(always)]
@@ -274,6 +305,32 @@ mod tests {
         let w = Tags::from_words([3, 2, 2], a.words().to_vec()).unwrap();
         assert_eq!(w, a);
         assert!(Tags::from_words([3, 2, 2], vec![u64::MAX]).is_none());
+    }
+
+    #[test]
+    fn brick_words_are_the_tags() {
+        for cells in [
+            [13usize, 11, 6],
+            [64, 4, 4],
+            [130, 5, 9],
+            [1, 1, 1],
+            [3, 9, 2],
+        ] {
+            let n: usize = cells.iter().product();
+            let flags: Vec<u8> = (0..n).map(|i| ((i * 7919) % 7 < 2) as u8).collect();
+            let t = Tags::from_chunks(cells, vec![flags]);
+            let bricked = Bricked::new(cells);
+            let words = t.brick_words(&bricked);
+            assert_eq!(words.len() * 64, bricked.len());
+            for (b, &w) in words.iter().enumerate() {
+                let origin = bricked.brick_origin(b);
+                for k in 0..64 {
+                    let c = Bricked::cell_in(origin, k);
+                    let want = (0..3).all(|a| c[a] < cells[a]) && t.get(c.map(|v| v as i64));
+                    assert_eq!(w >> k & 1 == 1, want, "{cells:?} brick {b} cell {k}");
+                }
+            }
+        }
     }
 
     #[test]

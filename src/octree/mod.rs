@@ -342,9 +342,13 @@ fn flatten(tags: &Tags, levels: &[Level], bricked: &Bricked) -> Vec<u8> {
     let mut skip = vec![0u8; bricked.len()];
     // Gathered at random by the lane walk, as the distance maps are.
     crate::heap::advise_huge_pages(&mut skip);
+    // A brick's tags in one word: its cells' tags, and the level-1 blocks
+    // (2³, whole inside the brick) they make, are bits of it.
+    let tag_words = tags.brick_words(bricked);
     skip.par_chunks_mut(64)
+        .zip(tag_words.par_iter())
         .enumerate()
-        .for_each(|(brick, out)| {
+        .for_each(|(brick, (out, &tagged))| {
             let origin = bricked.brick_origin(brick);
             // Blocks of 4 cells and more (levels from 1) hold the whole
             // brick: their walk is the same for its 64 cells.
@@ -357,9 +361,9 @@ fn flatten(tags: &Tags, levels: &[Level], bricked: &Bricked) -> Vec<u8> {
                 if (0..3).any(|a| c[a] >= tags.cells[a]) {
                     continue; // padding: never visited
                 }
-                *o = if tags.get(c.map(|v| v as i64)) {
+                *o = if tagged >> k & 1 == 1 {
                     TAGGED
-                } else if top == 0 || levels[0].get(c.map(|v| v >> 1)) {
+                } else if top == 0 || tagged & block_cells(k) != 0 {
                     0
                 } else {
                     shared as u8
@@ -367,6 +371,14 @@ fn flatten(tags: &Tags, levels: &[Level], bricked: &Bricked) -> Vec<u8> {
             }
         });
     skip
+}
+
+/// The brick bits of the 2³ block holding brick cell `k` (bit `x | y << 2 |
+/// z << 4` for brick coordinates 0..4): the block's first cell clears each
+/// coordinate's low bit, and its eight cells add 0 or 1 to each.
+#[inline(always)]
+fn block_cells(k: usize) -> u64 {
+    0x0033_0033u64 << (k & 0b10_1010)
 }
 
 #[cfg(test)]
@@ -482,8 +494,9 @@ mod tests {
     }
 
     /// Every level's bits are the OR of its 2³ children, checked cell by
-    /// cell against the level below, on lattices whose rows end inside a
-    /// word, fill one or two exactly, or span several, with odd extents.
+    /// cell against the level below, and each cell's skip byte is the climb
+    /// through them; on lattices whose rows end inside a word, fill one or
+    /// two exactly, or span several, with odd extents.
     #[test]
     fn levels_are_the_or_of_their_children() {
         for (cells, seed) in [
@@ -545,6 +558,26 @@ mod tests {
                         assert_eq!(level.words.last().unwrap() >> (bits % 64), 0);
                     }
                     fine = level.dims;
+                }
+                // The skip map: the level below the first occupied ancestor.
+                for z in 0..cells[2] {
+                    for y in 0..cells[1] {
+                        for x in 0..cells[0] {
+                            let c = [x, y, z];
+                            let want = if o.tags.get(c.map(|v| v as i64)) {
+                                TAGGED
+                            } else {
+                                let mut l = 0;
+                                while l < o.levels.len()
+                                    && !o.levels[l].get(c.map(|v| v >> (l + 1)))
+                                {
+                                    l += 1;
+                                }
+                                l as u8
+                            };
+                            assert_eq!(o.skip_byte(c.map(|v| v as i64)), want, "{cells:?} {c:?}");
+                        }
+                    }
                 }
             }
         }
