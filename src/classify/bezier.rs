@@ -17,7 +17,7 @@ use crate::filter::kernel::binomial;
 use crate::lattice::{Lattice, cell_at};
 use crate::simd::Isa;
 
-use super::masks::LinearMasks;
+use super::masks::{LinearMasks, SlabTags};
 use super::{
     Tags, refine_cells, slack, support_minus_iso, support_minus_iso_into, support_minus_iso_lane,
 };
@@ -596,21 +596,21 @@ fn refine_with_masks_on<T: Coefficient>(
     let eps = slack(field);
     let [nx, ny, nz] = lattice.cells;
     let slab = nx * ny;
-    let slabs: Vec<(Vec<u8>, LinearMasks)> = (0..nz)
+    let slabs: Vec<(SlabTags, LinearMasks)> = (0..nz)
         .into_par_iter()
         .map_init(
             || SubCells::new(field),
             |sub, z| {
-                let mut flags = vec![0u8; slab];
+                let mut flags = SlabTags::new(nx, ny);
                 let mut masks = Vec::new();
                 let first = z * slab;
                 let mut keep = |i: usize, mask: u64| {
-                    flags[i - first] = 1;
+                    flags.set(i - first);
                     if keep_masks {
                         masks.push((i, mask));
                     }
                 };
-                let cells = (first..first + slab).filter(|&i| coarse.get_index(i));
+                let cells = coarse.ones(first..first + slab);
                 crate::with_support!(sub.s, S => crate::with_isa!(isa, L, _M => {
                     refine_in_lanes::<S, L, T>(field, lattice, iso, eps, sub, cells, &mut keep)
                 }));

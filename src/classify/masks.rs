@@ -21,20 +21,44 @@ use crate::filter::coeffs::Coefficient;
 /// slots.
 pub type LinearMasks = Vec<(usize, u64)>;
 
+/// One z slab's tags as a classification decides them: rows of
+/// `⌈nx/64⌉` words ([`Tags::from_row_words`]), set one cell at a time.
+pub(crate) struct SlabTags {
+    nx: usize,
+    words: Vec<u64>,
+}
+
+impl SlabTags {
+    /// No cell of a slab of `[nx, ny]` cells tagged.
+    pub(crate) fn new(nx: usize, ny: usize) -> SlabTags {
+        SlabTags {
+            nx,
+            words: vec![0u64; ny * nx.div_ceil(64)],
+        }
+    }
+
+    /// Tags the slab's cell at `i` (`x + nx·y`).
+    #[inline]
+    pub(crate) fn set(&mut self, i: usize) {
+        let (y, x) = (i / self.nx, i % self.nx);
+        self.words[y * self.nx.div_ceil(64) + (x >> 6)] |= 1 << (x & 63);
+    }
+}
+
 /// The tags and masks of a classification that decided the lattice `cells`
-/// one z slab at a time (each slab's flags, and its masks in ascending
+/// one z slab at a time (each slab's tags, and its masks in ascending
 /// order), joined in slab order.
 pub(crate) fn join_slabs(
     cells: [usize; 3],
-    slabs: Vec<(Vec<u8>, LinearMasks)>,
+    slabs: Vec<(SlabTags, LinearMasks)>,
 ) -> (Tags, LinearMasks) {
     let mut all = Vec::new();
     let mut chunks = Vec::with_capacity(slabs.len());
-    for (flags, masks) in slabs {
-        chunks.push(flags);
+    for (tags, masks) in slabs {
+        chunks.push(tags.words);
         all.extend(masks);
     }
-    (Tags::from_chunks(cells, chunks), all)
+    (Tags::from_row_words(cells, chunks), all)
 }
 
 /// Sub-cell masks of the tagged cells of one classification.

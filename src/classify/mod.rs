@@ -352,20 +352,20 @@ pub fn accc_sub_with_masks<T: Coefficient>(
     let bounds = accc_sub::SubCellBounds::new(field.kernel(), n);
     let [nx, ny, nz] = lattice.cells;
     let slab = nx * ny;
-    let slabs: Vec<(Vec<u8>, masks::LinearMasks)> = (0..nz)
+    let slabs: Vec<(masks::SlabTags, masks::LinearMasks)> = (0..nz)
         .into_par_iter()
         .map_init(
             || bounds.scratch(),
             |w, z| {
-                let mut flags = vec![0u8; slab];
+                let mut flags = masks::SlabTags::new(nx, ny);
                 let mut found = Vec::new();
                 let first = z * slab;
                 crate::with_isa!(crate::simd::Isa::current(), _L, _M => {
-                    for i in (first..first + slab).filter(|&i| coarse.get_index(i)) {
+                    for i in coarse.ones(first..first + slab) {
                         let cell = crate::lattice::cell_at(lattice.cells, i);
                         let mask = bounds.cell_mask(field, cell, iso, w);
                         if mask != 0 {
-                            flags[i - first] = 1;
+                            flags.set(i - first);
                             if keep_masks {
                                 found.push((i, mask));
                             }

@@ -122,6 +122,30 @@ impl Tags {
         out
     }
 
+    /// The tagged cells' linear indices in `range` (in range), ascending:
+    /// a word at a time, so untagged stretches cost a word per 64 cells.
+    pub fn ones(&self, range: std::ops::Range<usize>) -> impl Iterator<Item = usize> + '_ {
+        let (start, end) = (range.start, range.end.max(range.start));
+        let first = start >> 6;
+        let last = end.div_ceil(64);
+        (first..last).flat_map(move |w| {
+            let mut bits = self.words[w];
+            if w == first {
+                bits &= u64::MAX << (start & 63);
+            }
+            if w + 1 == last && end & 63 != 0 {
+                bits &= u64::MAX >> (64 - (end & 63));
+            }
+            std::iter::from_fn(move || {
+                (bits != 0).then(|| {
+                    let k = bits.trailing_zeros() as usize;
+                    bits &= bits - 1;
+                    64 * w + k
+                })
+            })
+        })
+    }
+
     #[inline(always)]
     pub fn get_index(&self, i: usize) -> bool {
         (self.words[i >> 6] >> (i & 63)) & 1 != 0
@@ -329,6 +353,25 @@ mod tests {
                     let want = (0..3).all(|a| c[a] < cells[a]) && t.get(c.map(|v| v as i64));
                     assert_eq!(w >> k & 1 == 1, want, "{cells:?} brick {b} cell {k}");
                 }
+            }
+        }
+    }
+
+    #[test]
+    fn ones_are_the_tagged_cells_in_range() {
+        let cells = [13usize, 11, 2];
+        let n = 13 * 11 * 2;
+        let flags: Vec<u8> = (0..n).map(|i| ((i * 7919) % 5 == 0) as u8).collect();
+        let t = Tags::from_chunks(cells, vec![flags.clone()]);
+        for start in 0..n {
+            for end in [start, start + 1, start + 63, start + 64, start + 130, n] {
+                let end = end.min(n);
+                let want: Vec<usize> = (start..end).filter(|&i| flags[i] == 1).collect();
+                assert_eq!(
+                    t.ones(start..end).collect::<Vec<_>>(),
+                    want,
+                    "{start}..{end}"
+                );
             }
         }
     }
