@@ -85,16 +85,15 @@ impl TaggedIndex {
         init: impl Fn() -> W + Sync + Send,
         value: impl Fn(&mut W, [i64; 3]) -> V + Sync + Send,
     ) -> Vec<V> {
-        let slots: Vec<usize> = self
-            .words
-            .iter()
-            .enumerate()
-            .flat_map(|(brick, &w)| {
-                (0..64)
-                    .filter(move |k| w >> k & 1 == 1)
-                    .map(move |k| brick * 64 + k)
-            })
-            .collect();
+        // Set bits only: a brick without tags costs one test, not 64.
+        let mut slots: Vec<usize> = Vec::with_capacity(self.count);
+        for (brick, &w) in self.words.iter().enumerate() {
+            let mut bits = w;
+            while bits != 0 {
+                slots.push(brick * 64 + bits.trailing_zeros() as usize);
+                bits &= bits - 1;
+            }
+        }
         slots
             .par_iter()
             .map_init(init, |w, &slot| {
