@@ -100,8 +100,8 @@ impl Tags {
         let [nx, ny, nz] = self.cells;
         let [bx, by, _] = bricked.bricks();
         let mut out = vec![0u64; bricked.len() / 64];
-        if nx == 0 {
-            return out;
+        if self.cells.contains(&0) {
+            return out; // no bricks (a flat lattice)
         }
         out.par_chunks_mut(bx * by).enumerate().for_each_init(
             || vec![0u64; nx.div_ceil(64)],
