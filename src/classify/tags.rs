@@ -339,6 +339,8 @@ mod tests {
             [130, 5, 9],
             [1, 1, 1],
             [3, 9, 2],
+            [5, 0, 3],
+            [0, 4, 4],
         ] {
             let n: usize = cells.iter().product();
             let flags: Vec<u8> = (0..n).map(|i| ((i * 7919) % 7 < 2) as u8).collect();
