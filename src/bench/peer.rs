@@ -332,7 +332,7 @@ pub fn peer_bench(
         let m = pool.install(|| {
             SnellMeasure::new(opts, &scene_path, label, overrides, &reference, checker)
         })?;
-        snells.push((f, m));
+        snells.push(((traversal, f), m));
     }
     let vol = base.load_volume(&LoadOptions::default())?;
     let mut povs = Vec::new();
@@ -366,13 +366,13 @@ pub fn peer_bench(
         }
     }
     let mut rows = Vec::new();
-    let mut snell_hits: Vec<(String, HitImage)> = Vec::new();
+    let mut snell_hits: Vec<((&str, &str), HitImage)> = Vec::new();
     let mut warnings = Vec::new();
-    for (f, m) in snells {
+    for (key, m) in snells {
         let (row, hits) = m.finish(opts)?;
         observer.note(&row_line(&row));
         rows.push(row);
-        snell_hits.push((f.to_string(), hits));
+        snell_hits.push((key, hits));
     }
     let mut same_interpolant = Vec::new();
     for (m, (interp, _)) in povs.into_iter().zip(POV_ROWS) {
@@ -381,7 +381,10 @@ pub fn peer_bench(
         observer.note(&row_line(&row));
         warnings.extend(warn.into_iter().map(|w| format!("POV-Ray {label}: {w}")));
         let same = interp.filter().to_string();
-        if let Some((_, sh)) = snell_hits.iter().find(|(f, _)| *f == same) {
+        if let Some((_, sh)) = snell_hits
+            .iter()
+            .find(|(row, _)| *row == ("octree", same.as_str()))
+        {
             let c = compare_hits(&hits, sh, checker).map_err(|e| BenchError::Measure {
                 what: label.clone(),
                 msg: e.to_string(),

@@ -123,6 +123,17 @@ mod tests {
     use super::*;
     use crate::filter::FilterKind;
 
+    /// BMCC by the separable byte windows, as it was computed before words.
+    fn byte_windows<T: Coefficient>(f: &Field<T>, lat: &Lattice, iso: f64) -> Tags {
+        super::super::separable::per_cell(
+            f,
+            lat,
+            |c| [(c > iso) as u8, (c <= iso) as u8],
+            |w| w.iter().fold([0u8; 2], |a, b| [a[0] | b[0], a[1] | b[1]]),
+            |v| v[0] != 0 && v[1] != 0,
+        )
+    }
+
     /// The word windows tag exactly the cells the byte windows do, for every
     /// non-negative kernel's support, on lattices whose rows end inside a
     /// word, fill one exactly, or span several, at iso-values that split the
@@ -143,24 +154,12 @@ mod tests {
                 let f = crate::filter::Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
                 let lat = Lattice::new(f.kernel(), dims);
                 for iso in [20.5, 127.5, 240.0] {
-                    let want = super::super::separable::per_cell(
-                        &f,
-                        &lat,
-                        |c| [(c > iso) as u8, (c <= iso) as u8],
-                        |w| w.iter().fold([0u8; 2], |a, b| [a[0] | b[0], a[1] | b[1]]),
-                        |v| v[0] != 0 && v[1] != 0,
-                    );
+                    let want = byte_windows(&f, &lat, iso);
                     let got = bmcc_bits(&f, &lat, iso);
                     assert_eq!(got, want, "{name} {dims:?} iso {iso}");
                     assert_eq!(got.count(), want.count());
                     let f32s = crate::filter::Field::new_f32(&vol, f.kind());
-                    let want32 = super::super::separable::per_cell(
-                        &f32s,
-                        &lat,
-                        |c| [(c > iso) as u8, (c <= iso) as u8],
-                        |w| w.iter().fold([0u8; 2], |a, b| [a[0] | b[0], a[1] | b[1]]),
-                        |v| v[0] != 0 && v[1] != 0,
-                    );
+                    let want32 = byte_windows(&f32s, &lat, iso);
                     assert_eq!(bmcc_bits(&f32s, &lat, iso), want32, "{name} f32");
                 }
                 // NaN coefficients are on neither side.
@@ -170,13 +169,7 @@ mod tests {
                     c.data_mut()[k] = f64::NAN;
                 }
                 let nan = crate::filter::Field::from_coeffs(f.kind(), c);
-                let want = super::super::separable::per_cell(
-                    &nan,
-                    &lat,
-                    |c| [(c > 127.5) as u8, (c <= 127.5) as u8],
-                    |w| w.iter().fold([0u8; 2], |a, b| [a[0] | b[0], a[1] | b[1]]),
-                    |v| v[0] != 0 && v[1] != 0,
-                );
+                let want = byte_windows(&nan, &lat, 127.5);
                 assert_eq!(bmcc_bits(&nan, &lat, 127.5), want, "{name} {dims:?} NaN");
             }
         }

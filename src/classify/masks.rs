@@ -25,15 +25,19 @@ pub type LinearMasks = Vec<(usize, u64)>;
 /// `⌈nx/64⌉` words ([`Tags::from_row_words`]), set one cell at a time.
 pub(crate) struct SlabTags {
     nx: usize,
+    /// Words per row, `⌈nx/64⌉`.
+    row: usize,
     words: Vec<u64>,
 }
 
 impl SlabTags {
     /// No cell of a slab of `[nx, ny]` cells tagged.
     pub(crate) fn new(nx: usize, ny: usize) -> SlabTags {
+        let row = nx.div_ceil(64);
         SlabTags {
             nx,
-            words: vec![0u64; ny * nx.div_ceil(64)],
+            row,
+            words: vec![0u64; ny * row],
         }
     }
 
@@ -41,7 +45,7 @@ impl SlabTags {
     #[inline]
     pub(crate) fn set(&mut self, i: usize) {
         let (y, x) = (i / self.nx, i % self.nx);
-        self.words[y * self.nx.div_ceil(64) + (x >> 6)] |= 1 << (x & 63);
+        self.words[y * self.row + (x >> 6)] |= 1 << (x & 63);
     }
 }
 

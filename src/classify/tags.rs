@@ -77,13 +77,7 @@ impl Tags {
     pub fn bytes_into(&self, start: usize, out: &mut [u8]) {
         let mut i = start;
         for chunk in out.chunks_mut(64) {
-            let (w, s) = (i >> 6, i & 63);
-            let mut bits = self.words[w] >> s;
-            if s != 0
-                && let Some(next) = self.words.get(w + 1)
-            {
-                bits |= next << (64 - s);
-            }
+            let bits = word_at(&self.words, i);
             for (k, o) in chunk.iter_mut().enumerate() {
                 *o = (bits >> k) as u8 & 1;
             }
@@ -284,6 +278,19 @@ pub(crate) fn pack_rows(
     (words, count)
 }
 
+/// The 64 bits of `words` from bit `i` on (bits past the end read as 0).
+#[inline(always)]
+fn word_at(words: &[u64], i: usize) -> u64 {
+    let (w, s) = (i >> 6, i & 63);
+    let mut bits = words[w] >> s;
+    if s != 0
+        && let Some(next) = words.get(w + 1)
+    {
+        bits |= next << (64 - s);
+    }
+    bits
+}
+
 /// Bits `start .. start + len` of the linear bits `words` (which must hold
 /// them) into `out` from bit 0, zero past `len` (`out` may be longer).
 #[inline]
@@ -294,14 +301,7 @@ pub(crate) fn row_bits(words: &[u64], start: usize, len: usize, out: &mut [u64])
             *o = 0;
             continue;
         }
-        let i = start + 64 * k;
-        let (w, s) = (i >> 6, i & 63);
-        let mut bits = words[w] >> s;
-        if s != 0
-            && let Some(next) = words.get(w + 1)
-        {
-            bits |= next << (64 - s);
-        }
+        let bits = word_at(words, start + 64 * k);
         *o = if take < 64 {
             bits & ((1u64 << take) - 1)
         } else {

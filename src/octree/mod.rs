@@ -446,6 +446,22 @@ mod tests {
         assert_eq!(o.skip_level([12, 12, 12], o.top()), Some(0));
     }
 
+    /// The cells of a lattice of `cells` that a uniform draw from `seed`
+    /// puts under `density`.
+    fn scattered(cells: [usize; 3], seed: u64, density: f64) -> Vec<[usize; 3]> {
+        let n: usize = cells.iter().product();
+        (0..n)
+            .filter(|&k| crate::phantom::uniform(seed, k as u64) < density)
+            .map(|k| {
+                [
+                    k % cells[0],
+                    k / cells[0] % cells[1],
+                    k / (cells[0] * cells[1]),
+                ]
+            })
+            .collect()
+    }
+
     /// The block map gives every cell's skip byte: over scattered tags on
     /// lattices with partial bricks and 2³ blocks, one cell, and none.
     #[test]
@@ -458,17 +474,7 @@ mod tests {
             ([2, 7, 1], 4),
         ] {
             for density in [0.0, 0.002, 0.05, 0.5] {
-                let n: usize = cells.iter().product();
-                let on: Vec<[usize; 3]> = (0..n)
-                    .filter(|&k| crate::phantom::uniform(seed, k as u64) < density)
-                    .map(|k| {
-                        [
-                            k % cells[0],
-                            k / cells[0] % cells[1],
-                            k / (cells[0] * cells[1]),
-                        ]
-                    })
-                    .collect();
+                let on = scattered(cells, seed, density);
                 let o = Octree::build(tags_with(cells, &on));
                 assert_eq!(o.block_map().len() * 8, o.skip_map().len());
                 for z in 0..cells[2] as i64 {
@@ -509,17 +515,7 @@ mod tests {
             ([1, 7, 3], 7),
         ] {
             for density in [0.0, 0.003, 0.05, 0.6] {
-                let n: usize = cells.iter().product();
-                let on: Vec<[usize; 3]> = (0..n)
-                    .filter(|&k| crate::phantom::uniform(seed, k as u64) < density)
-                    .map(|k| {
-                        [
-                            k % cells[0],
-                            k / cells[0] % cells[1],
-                            k / (cells[0] * cells[1]),
-                        ]
-                    })
-                    .collect();
+                let on = scattered(cells, seed, density);
                 let o = Octree::build(tags_with(cells, &on));
                 let below = |c: [usize; 3], l: usize| -> bool {
                     if l == 0 {
