@@ -102,7 +102,12 @@ impl Accel {
 
     fn tagged(&self) -> Arc<TaggedIndex> {
         self.tagged
-            .get_or_init(|| Arc::new(TaggedIndex::build(self.octree.tags())))
+            .get_or_init(|| {
+                Arc::new(TaggedIndex::from_brick_words(
+                    self.octree.bricked(),
+                    self.octree.brick_tags(),
+                ))
+            })
             .clone()
     }
 

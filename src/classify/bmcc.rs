@@ -40,11 +40,7 @@ fn bits_s<const S: usize, T: Coefficient>(field: &Field<T>, lattice: &Lattice, i
     let w = ncx.div_ceil(64);
     let nyk = ncy + S - 1;
     let per_slab = nyk * w * 2 * std::mem::size_of::<u64>() * 2;
-    let zc = (CHUNK_BYTES / per_slab.max(1)).clamp(1, ncz.div_ceil(8).max(1));
-    let chunks: Vec<(usize, usize)> = (0..ncz)
-        .step_by(zc)
-        .map(|z0| (z0, (z0 + zc).min(ncz)))
-        .collect();
+    let chunks = super::separable::slab_chunks(ncz, per_slab, CHUNK_BYTES);
     let out: Vec<Vec<u64>> = chunks
         .par_iter()
         .map(|&(z0, z1)| {

@@ -20,6 +20,17 @@ use crate::lattice::Lattice;
 /// Bytes of intermediate values a chunk may hold.
 const CHUNK_BYTES: usize = 48 << 20;
 
+/// The z ranges `z0..z1` of `ncz` cell slabs that a pass takes in parallel:
+/// as many slabs of `per_slab` bytes of intermediates as `budget` holds,
+/// and at least eight chunks where there are slabs enough.
+pub(super) fn slab_chunks(ncz: usize, per_slab: usize, budget: usize) -> Vec<(usize, usize)> {
+    let zc = (budget / per_slab.max(1)).clamp(1, ncz.div_ceil(8).max(1));
+    (0..ncz)
+        .step_by(zc)
+        .map(|z0| (z0, (z0 + zc).min(ncz)))
+        .collect()
+}
+
 /// Computes `decide(reduce_z(reduce_y(reduce_x(map(c)))))` for every cell.
 /// `reduce` receives the `S` values of one window in weight order `j`.
 pub fn per_cell<V, M, R, D, T: Coefficient>(
@@ -66,11 +77,7 @@ where
     let data = coeffs.data();
     let slab = ncx * ncy;
     let per_slab = (ncy + s) * ncx * std::mem::size_of::<V>() * 2;
-    let zc = (CHUNK_BYTES / per_slab.max(1)).clamp(1, ncz.div_ceil(8).max(1));
-    let chunks: Vec<(usize, usize)> = (0..ncz)
-        .step_by(zc)
-        .map(|z0| (z0, (z0 + zc).min(ncz)))
-        .collect();
+    let chunks = slab_chunks(ncz, per_slab, CHUNK_BYTES);
     let out: Vec<Vec<u8>> = chunks
         .par_iter()
         .map(|&(z0, z1)| {

@@ -5,6 +5,8 @@
 //! The bitset is one word per 4³ brick with prefix popcounts per word, so a
 //! lookup is O(1) and the slots of nearby cells sit together.
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 use super::Tags;
@@ -17,23 +19,31 @@ pub struct TaggedIndex {
     bricked: Bricked,
     /// Tagged cells before each word of `words`.
     rank: Vec<u32>,
-    /// The tag bitset, one word per 4³ brick.
-    words: Vec<u64>,
+    /// The tag bitset, one word per 4³ brick ([`Tags::brick_words`]),
+    /// shared with the octree that filed them.
+    words: Arc<[u64]>,
     count: usize,
 }
 
 impl TaggedIndex {
-    /// Bytes the index of `tags` takes (to check a memory budget first).
+    /// Bytes the index of `tags` takes (to check a memory budget first),
+    /// its brick words counted even where it shares the octree's.
     pub fn bytes_for(tags: &Tags) -> usize {
         Bricked::new(tags.cells).len() / 64 * 12
     }
 
     pub fn build(tags: &Tags) -> TaggedIndex {
         let bricked = Bricked::new(tags.cells);
-        let words = tags.brick_words(&bricked);
+        TaggedIndex::from_brick_words(bricked, tags.brick_words(&bricked).into())
+    }
+
+    /// The index over tags already filed in bricks (`words`, one per brick
+    /// of `bricked`: [`Tags::brick_words`]), sharing them.
+    pub fn from_brick_words(bricked: Bricked, words: Arc<[u64]>) -> TaggedIndex {
+        assert_eq!(words.len() * 64, bricked.len(), "a word per brick");
         let mut rank = Vec::with_capacity(words.len());
         let mut acc = 0u32;
-        for w in &words {
+        for w in words.iter() {
             rank.push(acc);
             acc += w.count_ones();
         }
@@ -87,13 +97,7 @@ impl TaggedIndex {
     ) -> Vec<V> {
         // Set bits only: a brick without tags costs one test, not 64.
         let mut slots: Vec<usize> = Vec::with_capacity(self.count);
-        for (brick, &w) in self.words.iter().enumerate() {
-            let mut bits = w;
-            while bits != 0 {
-                slots.push(brick * 64 + bits.trailing_zeros() as usize);
-                bits &= bits - 1;
-            }
-        }
+        slots.extend(super::tags::set_bits(&self.words));
         slots
             .par_iter()
             .map_init(init, |w, &slot| {

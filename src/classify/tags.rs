@@ -130,13 +130,7 @@ impl Tags {
             if w + 1 == last && end & 63 != 0 {
                 bits &= u64::MAX >> (64 - (end & 63));
             }
-            std::iter::from_fn(move || {
-                (bits != 0).then(|| {
-                    let k = bits.trailing_zeros() as usize;
-                    bits &= bits - 1;
-                    64 * w + k
-                })
-            })
+            word_ones(w, bits)
         })
     }
 
@@ -193,16 +187,11 @@ impl Tags {
     pub fn bounds(&self) -> Option<[[usize; 3]; 2]> {
         let mut lo = [usize::MAX; 3];
         let mut hi = [0usize; 3];
-        for (w, &word) in self.words.iter().enumerate() {
-            let mut bits = word;
-            while bits != 0 {
-                let i = w * 64 + bits.trailing_zeros() as usize;
-                bits &= bits - 1;
-                let c = crate::lattice::cell_at(self.cells, i).map(|v| v as usize);
-                for a in 0..3 {
-                    lo[a] = lo[a].min(c[a]);
-                    hi[a] = hi[a].max(c[a]);
-                }
+        for i in set_bits(&self.words) {
+            let c = crate::lattice::cell_at(self.cells, i).map(|v| v as usize);
+            for a in 0..3 {
+                lo[a] = lo[a].min(c[a]);
+                hi[a] = hi[a].max(c[a]);
             }
         }
         (lo[0] <= hi[0]).then_some([lo, hi])
@@ -276,6 +265,27 @@ pub(crate) fn pack_rows(
     }
     assert_eq!(i, n, "rows must cover every cell once");
     (words, count)
+}
+
+/// The positions of the set bits of `words` (bit `k` of word `w` is
+/// `64·w + k`), ascending: a word per 64 clear bits.
+pub(crate) fn set_bits(words: &[u64]) -> impl Iterator<Item = usize> + '_ {
+    words
+        .iter()
+        .enumerate()
+        .flat_map(|(w, &bits)| word_ones(w, bits))
+}
+
+/// The set bits of `bits`, word `w` of a bitset, as bitset positions.
+#[inline(always)]
+fn word_ones(w: usize, mut bits: u64) -> impl Iterator<Item = usize> {
+    std::iter::from_fn(move || {
+        (bits != 0).then(|| {
+            let k = bits.trailing_zeros() as usize;
+            bits &= bits - 1;
+            64 * w + k
+        })
+    })
 }
 
 /// The 64 bits of `words` from bit `i` on (bits past the end read as 0).
@@ -359,12 +369,20 @@ mod tests {
         }
     }
 
-    #[test]
-    fn ones_are_the_tagged_cells_in_range() {
+    /// Every fifth cell of a 13×11×2 lattice tagged: rows end inside
+    /// words and runs cross them. The flags (a byte per cell) and the tags.
+    fn scattered_tags() -> (Vec<u8>, Tags) {
         let cells = [13usize, 11, 2];
-        let n = 13 * 11 * 2;
+        let n = cells.iter().product::<usize>();
         let flags: Vec<u8> = (0..n).map(|i| ((i * 7919) % 5 == 0) as u8).collect();
         let t = Tags::from_chunks(cells, vec![flags.clone()]);
+        (flags, t)
+    }
+
+    #[test]
+    fn ones_are_the_tagged_cells_in_range() {
+        let (flags, t) = scattered_tags();
+        let n = flags.len();
         for start in 0..n {
             for end in [start, start + 1, start + 63, start + 64, start + 130, n] {
                 let end = end.min(n);
@@ -381,10 +399,8 @@ mod tests {
     #[test]
     fn row_bytes_are_the_tags() {
         // Every start and length, across word boundaries and to the end.
-        let cells = [13usize, 11, 2];
-        let n = 13 * 11 * 2;
-        let flags: Vec<u8> = (0..n).map(|i| ((i * 7919) % 5 == 0) as u8).collect();
-        let t = Tags::from_chunks(cells, vec![flags.clone()]);
+        let (flags, t) = scattered_tags();
+        let n = flags.len();
         for start in 0..n {
             for len in [0, 1, 13, 63, 64, 65, 130, n - start] {
                 let len = len.min(n - start);

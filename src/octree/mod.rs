@@ -14,6 +14,8 @@
 
 pub mod distance;
 
+use std::sync::Arc;
+
 use rayon::prelude::*;
 
 pub use distance::Proximity;
@@ -104,6 +106,10 @@ pub struct Octree {
     /// an eighth of the entries at twice the size, for the lane walk.
     blocks: Vec<u16>,
     bricked: Bricked,
+    /// The tags filed in `bricked`, a word per brick ([`Tags::brick_words`]):
+    /// the skip map is made from them, and the tagged-cell index shares them
+    /// ([`Octree::brick_tags`]).
+    brick_tags: Arc<[u64]>,
     /// Box of cells holding every tag ([`Tags::bounds`]).
     bounds: Option<[[usize; 3]; 2]>,
 }
@@ -125,7 +131,8 @@ impl Octree {
             levels.push(next);
         }
         let bricked = Bricked::new(tags.cells);
-        let skip = flatten(&tags, &levels, &bricked);
+        let brick_tags: Arc<[u64]> = tags.brick_words(&bricked).into();
+        let skip = flatten(&tags, &brick_tags, &levels, &bricked);
         let blocks = block_map(&skip, &bricked, tags.cells);
         let bounds = tags.bounds();
         Octree {
@@ -134,8 +141,17 @@ impl Octree {
             skip,
             blocks,
             bricked,
+            brick_tags,
             bounds,
         }
+    }
+
+    /// The tags a word per 4³ brick of [`Octree::bricked`], as
+    /// [`TaggedIndex::from_brick_words`] takes them.
+    ///
+    /// [`TaggedIndex::from_brick_words`]: crate::classify::tagged::TaggedIndex::from_brick_words
+    pub fn brick_tags(&self) -> Arc<[u64]> {
+        self.brick_tags.clone()
     }
 
     /// Height of the tree: the root is level `top()`.
@@ -190,6 +206,7 @@ impl Octree {
             + self.levels.iter().map(|l| l.words.len() * 8).sum::<usize>()
             + self.skip.len()
             + self.blocks.len() * 2
+            + self.brick_tags.len() * 8
     }
 
     /// The occupied blocks of `2^level` cells (`1 ≤ level ≤ top()`), as
@@ -337,14 +354,15 @@ fn block_map(skip: &[u8], bricked: &Bricked, cells: [usize; 3]) -> Vec<u16> {
 
 /// Per cell, the level of the largest empty aligned block holding it (the
 /// largest `l` whose block at every level up to `l` is empty), or `TAGGED`.
-fn flatten(tags: &Tags, levels: &[Level], bricked: &Bricked) -> Vec<u8> {
+///
+/// `tag_words`: a brick's tags in one word ([`Tags::brick_words`]): its
+/// cells' tags, and the level-1 blocks (2³, whole inside the brick) they
+/// make, are bits of it.
+fn flatten(tags: &Tags, tag_words: &[u64], levels: &[Level], bricked: &Bricked) -> Vec<u8> {
     let top = levels.len();
     let mut skip = vec![0u8; bricked.len()];
     // Gathered at random by the lane walk, as the distance maps are.
     crate::heap::advise_huge_pages(&mut skip);
-    // A brick's tags in one word: its cells' tags, and the level-1 blocks
-    // (2³, whole inside the brick) they make, are bits of it.
-    let tag_words = tags.brick_words(bricked);
     skip.par_chunks_mut(64)
         .zip(tag_words.par_iter())
         .enumerate()
@@ -452,13 +470,7 @@ mod tests {
         let n: usize = cells.iter().product();
         (0..n)
             .filter(|&k| crate::phantom::uniform(seed, k as u64) < density)
-            .map(|k| {
-                [
-                    k % cells[0],
-                    k / cells[0] % cells[1],
-                    k / (cells[0] * cells[1]),
-                ]
-            })
+            .map(|k| crate::lattice::cell_at(cells, k).map(|v| v as usize))
             .collect()
     }
 
@@ -497,6 +509,24 @@ mod tests {
             }
         }
         assert!(checked.iter().all(|&k| k > 100), "{checked:?}");
+    }
+
+    /// The index over the octree's brick tags is the index over its tags.
+    #[test]
+    fn brick_tags_index_the_tags() {
+        use crate::classify::tagged::TaggedIndex;
+        for (cells, seed) in [([13usize, 9, 5], 1u64), ([1, 1, 1], 2), ([31, 2, 7], 3)] {
+            let on = scattered(cells, seed, 0.1);
+            let o = Octree::build(tags_with(cells, &on));
+            let shared = TaggedIndex::from_brick_words(o.bricked(), o.brick_tags());
+            let own = TaggedIndex::build(o.tags());
+            assert_eq!(shared.count(), own.count());
+            assert_eq!(shared.words(), own.words());
+            for k in 0..cells.iter().product() {
+                let c = crate::lattice::cell_at(cells, k);
+                assert_eq!(shared.slot(c), own.slot(c), "{cells:?} {c:?}");
+            }
+        }
     }
 
     /// Every level's bits are the OR of its 2³ children, checked cell by
