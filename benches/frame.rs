@@ -28,37 +28,30 @@ fn main() {
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
-            "--set" => sets.push(args.next().expect("--set needs a value")),
-            "--frames" => {
-                frames = args
-                    .next()
-                    .and_then(|v| v.parse().ok())
-                    .expect("--frames N")
-            }
-            "--prepares" => {
-                prepares = args
-                    .next()
-                    .and_then(|v| v.parse().ok())
-                    .expect("--prepares N")
-            }
+            "--set" => sets.push(
+                args.next()
+                    .unwrap_or_else(|| usage("--set needs KEY=VALUE")),
+            ),
+            "--frames" => frames = count(args.next(), "--frames"),
+            "--prepares" => prepares = count(args.next(), "--prepares"),
             "--bench" => {}
             s if s.ends_with(".toml") => scene_path = PathBuf::from(s),
-            other => panic!("unknown argument {other}"),
+            other => usage(&format!("unknown argument {other}")),
         }
     }
-    let scene = Scene::load(&scene_path, &sets).unwrap_or_else(|e| panic!("{e}"));
+    let scene = Scene::load(&scene_path, &sets).unwrap_or_else(|e| fail(&e));
     if prepares > 0 {
         time_preparations(&scene, prepares);
     }
     let t = Instant::now();
-    let prep =
-        Prepared::for_scene(&scene, &LoadOptions::default()).unwrap_or_else(|e| panic!("{e}"));
+    let prep = Prepared::for_scene(&scene, &LoadOptions::default()).unwrap_or_else(|e| fail(&e));
     let first = render::render(&scene, &prep, None);
     println!(
-        "{}: prepare + first frame {:.1} ms ({} threads)",
+        "{}: prepare + first frame {:.1} ms ({} threads, {})",
         scene_path.display(),
         t.elapsed().as_secs_f64() * 1e3,
-        rayon::current_num_threads()
+        rayon::current_num_threads(),
+        snell::bench::machine::cpu_model().unwrap_or_else(|| "unknown CPU".into())
     );
     drop(first);
     let mut runs: Vec<(f64, render::RenderStats)> = (0..frames.max(1))
@@ -80,14 +73,36 @@ fn main() {
     println!("{}", median.1.table());
 }
 
+/// `--frames N` or `--prepares N`'s count, or the usage.
+fn count(value: Option<String>, flag: &str) -> usize {
+    value
+        .and_then(|v| v.parse().ok())
+        .unwrap_or_else(|| usage(&format!("{flag} needs a count")))
+}
+
+/// Prints `problem` and how to call the bench, and exits with status 2.
+fn usage(problem: &str) -> ! {
+    eprintln!(
+        "frame: {problem}\nusage: cargo bench --bench frame -- [SCENE.toml] [--set KEY=VALUE]... \
+         [--frames N] [--prepares N]"
+    );
+    std::process::exit(2)
+}
+
+/// Prints an error loading or preparing the scene and exits with status 1.
+fn fail(e: &dyn std::fmt::Display) -> ! {
+    eprintln!("frame: {e}");
+    std::process::exit(1)
+}
+
 /// Prepares `scene` from scratch `n` times and prints the median of the
 /// whole preparation and of each of its steps (ms).
 fn time_preparations(scene: &Scene, n: usize) {
     let mut rows: Vec<[f64; 5]> = (0..n)
         .map(|_| {
             let t = Instant::now();
-            let p = Prepared::for_scene(scene, &LoadOptions::default())
-                .unwrap_or_else(|e| panic!("{e}"));
+            let p =
+                Prepared::for_scene(scene, &LoadOptions::default()).unwrap_or_else(|e| fail(&e));
             let wall = t.elapsed().as_secs_f64();
             let s = &p.times;
             [wall, s.load_s, s.prefilter_s, s.classify_s, s.octree_s].map(|v| v * 1e3)

@@ -28,12 +28,44 @@ pub fn machine() -> Machine {
     }
 }
 
-fn cpu_model() -> Option<String> {
-    let text = std::fs::read_to_string("/proc/cpuinfo").ok()?;
-    text.lines()
-        .find(|l| l.starts_with("model name"))
-        .and_then(|l| l.split_once(':'))
-        .map(|(_, v)| v.trim().to_string())
+/// The CPU's model name with its family, model and clock, from
+/// `/proc/cpuinfo` (see [`describe_cpu`]).
+pub fn cpu_model() -> Option<String> {
+    describe_cpu(&std::fs::read_to_string("/proc/cpuinfo").ok()?)
+}
+
+/// The first processor's `model name`, followed by its `cpu family`,
+/// `model` and `cpu MHz` where present: virtual machines often report a
+/// bare name ("AMD EPYC") for hosts of different generations and clocks
+/// that ran the same code 1.5× apart (BENCHMARKS.md, *The same code on a
+/// Zen 4 host*), so a recorded time names the numbers that tell them apart.
+fn describe_cpu(cpuinfo: &str) -> Option<String> {
+    // Only the first processor's block: the others repeat it.
+    let first = cpuinfo.split("\n\n").next()?;
+    let field = |key: &str| {
+        first.lines().find_map(|l| {
+            let (k, v) = l.split_once(':')?;
+            (k.trim() == key)
+                .then(|| v.trim())
+                .filter(|v| !v.is_empty())
+        })
+    };
+    let name = field("model name")?;
+    let mut details = Vec::new();
+    if let Some(f) = field("cpu family") {
+        details.push(format!("family {f}"));
+    }
+    if let Some(m) = field("model") {
+        details.push(format!("model {m}"));
+    }
+    if let Some(mhz) = field("cpu MHz").and_then(|v| v.parse::<f64>().ok()) {
+        details.push(format!("{mhz:.0} MHz"));
+    }
+    Some(if details.is_empty() {
+        name.to_string()
+    } else {
+        format!("{name} ({})", details.join(", "))
+    })
 }
 
 /// The working tree's revision, so a table can be traced to its code.
@@ -177,6 +209,24 @@ mod tests {
         assert_eq!(utc_timestamp(951_782_400), "2000-02-29T00:00:00Z");
         assert_eq!(utc_timestamp(1_700_000_000), "2023-11-14T22:13:20Z");
         assert_eq!(utc_timestamp(4_107_542_399), "2100-02-28T23:59:59Z");
+    }
+
+    #[test]
+    fn cpu_descriptions() {
+        let two = "processor\t: 0\nvendor_id\t: AuthenticAMD\ncpu family\t: 25\nmodel\t\t: 17\n\
+                   model name\t: AMD EPYC\nstepping\t: 1\ncpu MHz\t\t: 2596.138\n\n\
+                   processor\t: 1\ncpu family\t: 26\nmodel\t\t: 2\nmodel name\t: Other\n";
+        assert_eq!(
+            describe_cpu(two).as_deref(),
+            Some("AMD EPYC (family 25, model 17, 2596 MHz)")
+        );
+        // A bare name stays bare; no name, no description.
+        assert_eq!(
+            describe_cpu("model name\t: Some CPU\n").as_deref(),
+            Some("Some CPU")
+        );
+        assert_eq!(describe_cpu("cpu family\t: 6\nmodel\t: 85\n"), None);
+        assert_eq!(describe_cpu(""), None);
     }
 
     #[test]
