@@ -102,9 +102,10 @@ pub struct Octree {
     /// traversal step is one byte load instead of a walk down the tree.
     /// Stored in 4³ bricks ([`Bricked`]) for locality along rays.
     skip: Vec<u8>,
-    /// The same answers per 2³ block of a brick ([`Octree::block_map`]):
-    /// an eighth of the entries at twice the size, for the lane walk.
-    blocks: Vec<u16>,
+    /// The level every empty 2³ block of a brick shares, a byte per brick
+    /// ([`Octree::brick_levels`]): with the brick's tag word, every cell's
+    /// skip byte, from 1/64 of the skip map.
+    brick_levels: Vec<u8>,
     bricked: Bricked,
     /// The tags filed in `bricked`, a word per brick ([`Tags::brick_words`]):
     /// the skip map is made from them, and the tagged-cell index shares them
@@ -132,14 +133,14 @@ impl Octree {
         }
         let bricked = Bricked::new(tags.cells);
         let brick_tags: Arc<[u64]> = tags.brick_words(&bricked).into();
-        let skip = flatten(&tags, &brick_tags, &levels, &bricked);
-        let blocks = block_map(&skip, &bricked, tags.cells);
+        let brick_levels = brick_levels(&levels, &bricked);
+        let skip = flatten(&tags, &brick_tags, &brick_levels, &bricked);
         let bounds = tags.bounds();
         Octree {
             tags,
             levels,
             skip,
-            blocks,
+            brick_levels,
             bricked,
             brick_tags,
             bounds,
@@ -175,25 +176,26 @@ impl Octree {
         &self.skip
     }
 
-    /// [`Octree::skip_map`] per 2³ block, for lane code that gathers it:
-    /// entry `8·brick + b` (`b`: bit 0, 1, 2 for the block's upper half
-    /// along x, y, z in its brick) is the level every cell of an empty
-    /// block shares (at least 1), or [`OCCUPIED`] plus a bit per tagged
-    /// cell (bit `(x & 1) | (y & 1) << 1 | (z & 1) << 2`; the block's other
-    /// cells have level 0). The walk's byte for a cell follows from its
-    /// entry ([`Octree::skip_byte_from_blocks`]), so a walk over either map
-    /// visits the same cells; this one is a quarter the size (the teapot's
-    /// 2.9 MB against 11.5), so more of it stays in cache.
-    pub fn block_map(&self) -> &[u16] {
-        &self.blocks
+    /// Per brick of [`Octree::bricked`], the level of the largest empty
+    /// block holding each of its cells whose 2³ block holds no tagged
+    /// cell (the level of the brick's own largest empty block where the
+    /// brick is empty, else 1; 0 for a lattice of one cell). A cell's skip
+    /// byte follows from it and the brick's tag word
+    /// ([`Octree::skip_byte_from_bricks`]), so a walk over these bytes and
+    /// [`Octree::brick_tags`] visits the cells it would over the skip map,
+    /// from a byte per 64 cells (the teapot's 180 KB against the block
+    /// map's 2.9 MB) and the tag words the tagged-cell test reads anyway.
+    /// Its length is a multiple of 4.
+    pub fn brick_levels(&self) -> &[u8] {
+        &self.brick_levels
     }
 
-    /// The skip byte of cell `c` (in range) from [`Octree::block_map`].
+    /// The skip byte of cell `c` (in range) from [`Octree::brick_levels`]
+    /// and the brick's tag word.
     #[inline(always)]
-    pub fn skip_byte_from_blocks(&self, c: [i64; 3]) -> u8 {
+    pub fn skip_byte_from_bricks(&self, c: [i64; 3]) -> u8 {
         let i = self.bricked.index(c);
-        let e = self.blocks[block_slot(i)];
-        decode_block(e, cell_bit(i))
+        decode_brick(self.brick_tags[i >> 6], self.brick_levels[i >> 6], i & 63)
     }
 
     /// The brick layout of [`Octree::skip_map`].
@@ -205,7 +207,7 @@ impl Octree {
         self.tags.bytes()
             + self.levels.iter().map(|l| l.words.len() * 8).sum::<usize>()
             + self.skip.len()
-            + self.blocks.len() * 2
+            + self.brick_levels.len()
             + self.brick_tags.len() * 8
     }
 
@@ -273,83 +275,41 @@ impl Octree {
     }
 }
 
-/// Marks an occupied 2³ block in [`Octree::block_map`]; its low 8 bits say
-/// which cells are tagged. Above every level (a level is below 64).
-pub const OCCUPIED: u16 = 0x100;
-
-/// [`Octree::block_map`]'s entry of the cell in bricked slot `i`.
+/// The skip byte of brick cell `k` (`< 64`) from its brick's tag word and
+/// level ([`Octree::brick_levels`]).
 #[inline(always)]
-pub fn block_slot(i: usize) -> usize {
-    // Bit 1 of the within-brick x, y and z (bits 1, 3, 5 of the slot).
-    (i >> 6 << 3) | ((i >> 1) & 1) | ((i >> 2) & 2) | ((i >> 3) & 4)
-}
-
-/// The bit of the cell in bricked slot `i` within its 2³ block's entry.
-#[inline(always)]
-pub fn cell_bit(i: usize) -> u32 {
-    // Bit 0 of the within-brick x, y and z (bits 0, 2, 4 of the slot).
-    ((i & 1) | ((i >> 1) & 2) | ((i >> 2) & 4)) as u32
-}
-
-/// The skip byte of cell bit `bit` of a block entry `e`.
-#[inline(always)]
-pub fn decode_block(e: u16, bit: u32) -> u8 {
-    if e >= OCCUPIED {
-        if (e >> bit) & 1 == 1 { TAGGED } else { 0 }
+pub fn decode_brick(word: u64, level: u8, k: usize) -> u8 {
+    if word >> k & 1 == 1 {
+        TAGGED
+    } else if word & block_cells(k) != 0 {
+        0
     } else {
-        e as u8
+        level
     }
 }
 
-/// [`Octree::block_map`] from the skip map: in an empty 2³ block every cell
-/// has the brick's level (at least 1); in an occupied one a cell is tagged
-/// or at level 0. Padding cells (outside the lattice) are never visited and
-/// not read.
-fn block_map(skip: &[u8], bricked: &Bricked, cells: [usize; 3]) -> Vec<u16> {
-    let mut blocks = vec![0u16; skip.len() / 8];
-    crate::heap::advise_huge_pages(&mut blocks);
-    blocks
-        .par_chunks_mut(8)
-        .zip(skip.par_chunks(64))
+/// [`Octree::brick_levels`]: per brick, the level of the largest empty
+/// block holding an empty 2³ block of it (the largest `l ≥ 1` whose block
+/// at every level from 2 up to `l` is empty), 0 for a lattice of one cell.
+fn brick_levels(levels: &[Level], bricked: &Bricked) -> Vec<u8> {
+    let top = levels.len();
+    let bricks = bricked.len() / 64;
+    // Padded to whole dwords, which the lane walk gathers.
+    let mut out = vec![0u8; bricks.next_multiple_of(4)];
+    out[..bricks]
+        .par_iter_mut()
         .enumerate()
-        .for_each(|(brick, (out, bytes))| {
-            // Most bricks are one empty block of a level (at least 1): all
-            // their cells share it.
-            if bytes[0] != 0 && bytes[0] != TAGGED && bytes.iter().all(|&b| b == bytes[0]) {
-                out.fill(bytes[0] as u16);
-                return;
-            }
+        .for_each(|(brick, o)| {
             let origin = bricked.brick_origin(brick);
-            // Per block: occupied, its tagged cells, the level of its cells.
-            let mut occupied = [false; 8];
-            let mut tagged = [0u16; 8];
-            let mut level = [0u16; 8];
-            for (k, &b) in bytes.iter().enumerate() {
-                let c = Bricked::cell_in(origin, k);
-                if (0..3).any(|a| c[a] >= cells[a]) {
-                    continue;
-                }
-                // Within the brick (`k < 64`), the block's entry is below 8.
-                let j = block_slot(k);
-                match b {
-                    TAGGED => {
-                        occupied[j] = true;
-                        tagged[j] |= 1 << cell_bit(k);
-                    }
-                    0 => occupied[j] = true,
-                    l => level[j] = l as u16,
-                }
+            // Blocks of 4 cells and more (levels from 2) hold the whole
+            // brick: their walk is the same for its 64 cells.
+            let mut shared = 1.min(top);
+            while shared < top && !levels[shared].get(origin.map(|v| v >> (shared + 1))) {
+                shared += 1;
             }
-            for j in 0..8 {
-                out[j] = if occupied[j] {
-                    debug_assert_eq!(level[j], 0, "a level beside a tagged cell");
-                    OCCUPIED | tagged[j]
-                } else {
-                    level[j]
-                };
-            }
+            *o = shared as u8;
         });
-    blocks
+    out
 }
 
 /// Per cell, the level of the largest empty aligned block holding it (the
@@ -357,35 +317,23 @@ fn block_map(skip: &[u8], bricked: &Bricked, cells: [usize; 3]) -> Vec<u16> {
 ///
 /// `tag_words`: a brick's tags in one word ([`Tags::brick_words`]): its
 /// cells' tags, and the level-1 blocks (2³, whole inside the brick) they
-/// make, are bits of it.
-fn flatten(tags: &Tags, tag_words: &[u64], levels: &[Level], bricked: &Bricked) -> Vec<u8> {
-    let top = levels.len();
+/// make, are bits of it; `brick_levels` ([`brick_levels`]) gives the rest
+/// ([`decode_brick`]).
+fn flatten(tags: &Tags, tag_words: &[u64], brick_levels: &[u8], bricked: &Bricked) -> Vec<u8> {
     let mut skip = vec![0u8; bricked.len()];
     // Gathered at random by the lane walk, as the distance maps are.
     crate::heap::advise_huge_pages(&mut skip);
     skip.par_chunks_mut(64)
-        .zip(tag_words.par_iter())
+        .zip(tag_words.par_iter().zip(brick_levels))
         .enumerate()
-        .for_each(|(brick, (out, &tagged))| {
+        .for_each(|(brick, (out, (&tagged, &level)))| {
             let origin = bricked.brick_origin(brick);
-            // Blocks of 4 cells and more (levels from 1) hold the whole
-            // brick: their walk is the same for its 64 cells.
-            let mut shared = 1.min(top);
-            while shared < top && !levels[shared].get(origin.map(|v| v >> (shared + 1))) {
-                shared += 1;
-            }
             for (k, o) in out.iter_mut().enumerate() {
                 let c = Bricked::cell_in(origin, k);
                 if (0..3).any(|a| c[a] >= tags.cells[a]) {
                     continue; // padding: never visited
                 }
-                *o = if tagged >> k & 1 == 1 {
-                    TAGGED
-                } else if top == 0 || tagged & block_cells(k) != 0 {
-                    0
-                } else {
-                    shared as u8
-                };
+                *o = decode_brick(tagged, level, k);
             }
         });
     skip
@@ -474,27 +422,32 @@ mod tests {
             .collect()
     }
 
-    /// The block map gives every cell's skip byte: over scattered tags on
-    /// lattices with partial bricks and 2³ blocks, one cell, and none.
+    /// The skip map, and the brick levels with the tag words, give every
+    /// cell's level as the descent through the tree does: over scattered
+    /// tags on lattices with partial bricks and 2³ blocks, one cell, and
+    /// none.
     #[test]
-    fn block_map_gives_the_skip_bytes() {
+    fn brick_levels_give_the_skip_bytes() {
         let mut checked = [0usize; 3];
         for (cells, seed) in [
             ([13, 9, 5], 1u64),
             ([31, 17, 22], 2),
             ([1, 1, 1], 3),
             ([2, 7, 1], 4),
+            ([70, 9, 40], 5),
         ] {
-            for density in [0.0, 0.002, 0.05, 0.5] {
+            for density in [0.0, 0.0005, 0.002, 0.05, 0.5] {
                 let on = scattered(cells, seed, density);
                 let o = Octree::build(tags_with(cells, &on));
-                assert_eq!(o.block_map().len() * 8, o.skip_map().len());
+                assert!(o.brick_levels().len().is_multiple_of(4));
+                assert!(o.brick_levels().len() * 64 >= o.skip_map().len());
                 for z in 0..cells[2] as i64 {
                     for y in 0..cells[1] as i64 {
                         for x in 0..cells[0] as i64 {
-                            let b = o.skip_byte([x, y, z]);
+                            let b = o.skip_level([x, y, z], 0).map_or(TAGGED, |l| l as u8);
+                            assert_eq!(o.skip_byte([x, y, z]), b, "{cells:?} {x},{y},{z}");
                             assert_eq!(
-                                o.skip_byte_from_blocks([x, y, z]),
+                                o.skip_byte_from_bricks([x, y, z]),
                                 b,
                                 "{cells:?} {x},{y},{z}"
                             );

@@ -31,13 +31,13 @@ use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
 use super::wide::{
     CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks, lane_planes,
-    layout_fits, reads_block_map,
+    layout_fits, reads_brick_levels,
 };
 use crate::classify::bezier::SUB;
 use crate::classify::plane::{self, CellTests};
 use crate::filter::coeffs::Coefficient;
 use crate::octree::distance::Proximity;
-use crate::octree::{OCCUPIED, Octree, TAGGED};
+use crate::octree::{Octree, TAGGED};
 use crate::render::stats::Counters;
 
 const LANES: usize = 4;
@@ -312,7 +312,7 @@ unsafe fn gather_bytes(bytes: &[u8], index: __m256i, go: __m256i) -> __m256i {
 }
 
 /// The octree's blocks, a block level per cell, from the byte map or the
-/// block map ([`super::wide`]'s `Blocks`).
+/// brick levels ([`super::wide`]'s `Blocks`).
 struct Blocks<M> {
     map: M,
     leaf_level: __m256i,
@@ -336,51 +336,45 @@ impl SkipBytes for ByteMap<'_> {
     }
 }
 
-/// The octree's entries per 2³ block ([`Octree::block_map`]), decoded as
-/// [`super::wide`]'s `BlockMap` decodes them, for the lattices
-/// [`reads_block_map`] picks. `SNELL_ISA=avx2`, single thread, 3
-/// alternating runs of 3 frames against the byte map: traverse teapot
-/// 130.2–141.2 → 126.8–133.2 ms, cranium 82.6–87.1 → 76.0–79.8 (2 runs).
-struct BlockMap<'a>(&'a [u16]);
+/// The octree's levels per brick with the bricks' tag words
+/// ([`super::wide`]'s `BrickLevels`), for the lattices
+/// [`reads_brick_levels`] picks. `SNELL_ISA=avx2`, two threads, four
+/// alternating rounds of 10 teapot frames on a Zen 4 against the octree's
+/// former map of a `u16` per 2³ block: traverse stage 146.5–162.8 →
+/// 135.3–153.4 ms CPU (better in three rounds of four).
+struct BrickLevels<'a> {
+    words: &'a [u64],
+    levels: &'a [u8],
+}
 
-impl SkipBytes for BlockMap<'_> {
-    /// [`Octree::skip_byte_from_blocks`] per lane.
+impl SkipBytes for BrickLevels<'_> {
+    /// [`crate::octree::decode_brick`] per lane.
     #[inline(always)]
     unsafe fn byte(&self, slot: __m256i, go: __m256i) -> __m256i {
         // SAFETY: called only from the walk, which runs with AVX2; a
-        // lattice cell's slot has its block's entry in the map, whose
-        // length is a multiple of 8 (`layout_fits`), so the dword holding
-        // it does too.
+        // lattice cell's brick has a tag word and a level, whose table's
+        // length is a multiple of 4 (`layout_fits`).
         unsafe {
-            let bit_at = |from: u32, to: u32| {
-                let b = _mm256_srlv_epi64(slot, _mm256_set1_epi64x((from - to) as i64));
-                _mm256_and_si256(b, _mm256_set1_epi64x(1 << to))
-            };
-            // [`crate::octree::block_slot`]: bits 1, 3, 5 of the slot.
-            let entry = _mm256_or_si256(
-                _mm256_slli_epi64::<3>(_mm256_srli_epi64::<6>(slot)),
-                _mm256_or_si256(bit_at(1, 0), _mm256_or_si256(bit_at(3, 1), bit_at(5, 2))),
+            let brick = _mm256_srli_epi64::<6>(slot);
+            let k = _mm256_and_si256(slot, _mm256_set1_epi64x(63));
+            let word = _mm256_mask_i64gather_epi64::<8>(
+                _mm256_setzero_si256(),
+                self.words.as_ptr() as *const i64,
+                brick,
+                go,
             );
-            let dword = _mm256_mask_i64gather_epi32::<4>(
-                _mm_setzero_si128(),
-                self.0.as_ptr() as *const i32,
-                _mm256_srli_epi64::<1>(entry),
-                narrow(go),
-            );
-            let shift = _mm256_slli_epi64::<4>(_mm256_and_si256(entry, _mm256_set1_epi64x(1)));
-            let e = _mm256_and_si256(
-                _mm256_srlv_epi64(_mm256_cvtepu32_epi64(dword), shift),
-                _mm256_set1_epi64x(0xFFFF),
-            );
-            // [`crate::octree::cell_bit`]: bits 0, 2, 4 of the slot.
-            let bit = _mm256_or_si256(bit_at(0, 0), _mm256_or_si256(bit_at(2, 1), bit_at(4, 2)));
-            // Entries are below 2¹⁶: the signed compare is the unsigned one.
-            let occupied = _mm256_cmpgt_epi64(e, _mm256_set1_epi64x(OCCUPIED as i64 - 1));
+            let level = gather_bytes(self.levels, brick, go);
             let one = _mm256_set1_epi64x(1);
-            let tagged = _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_srlv_epi64(e, bit), one), one);
-            // Occupied: TAGGED or 0; empty: the level.
-            let occ = _mm256_and_si256(tagged, _mm256_set1_epi64x(TAGGED as i64));
-            sel(occupied, occ, e)
+            let zero = _mm256_setzero_si256();
+            let tagged = _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_srlv_epi64(word, k), one), one);
+            // The 2³ block's cells: 0x0033_0033 << (k & 0b10_1010).
+            let block = _mm256_sllv_epi64(
+                _mm256_set1_epi64x(0x0033_0033),
+                _mm256_and_si256(k, _mm256_set1_epi64x(0b10_1010)),
+            );
+            let empty = _mm256_cmpeq_epi64(_mm256_and_si256(word, block), zero);
+            let byte = _mm256_and_si256(empty, level);
+            sel(tagged, _mm256_set1_epi64x(TAGGED as i64), byte)
         }
     }
 }
@@ -858,12 +852,13 @@ pub unsafe fn walk_octree<T: Coefficient>(
     record: &mut Queue,
     c: &mut Counters,
 ) {
-    let block_map = reads_block_map(tree.0);
+    let brick_levels = reads_brick_levels(tree.0);
     // SAFETY: the caller's contract.
-    unsafe { walk_octree_on(ctx, tree, block_map, rays, input, solve, record, c) }
+    unsafe { walk_octree_on(ctx, tree, brick_levels, rays, input, solve, record, c) }
 }
 
-/// [`walk_octree`] reading the block map (`block_map`) or the byte map.
+/// [`walk_octree`] reading the brick levels (`brick_levels`) or the byte
+/// map.
 ///
 /// # Safety
 /// [`fits`] must be true.
@@ -872,7 +867,7 @@ pub unsafe fn walk_octree<T: Coefficient>(
 unsafe fn walk_octree_on<T: Coefficient>(
     ctx: &Ctx<T>,
     (tree, leaf_level): (&Octree, u32),
-    block_map: bool,
+    brick_levels: bool,
     rays: &mut Rays,
     input: &[u32],
     solve: &mut Queue,
@@ -893,8 +888,12 @@ unsafe fn walk_octree_on<T: Coefficient>(
     let leaf_level = _mm256_set1_epi64x(leaf_level as i64);
     STAGED.with_borrow_mut(|staged| {
         // SAFETY (both): the caller checked the features.
-        if block_map {
-            let map = BlockMap(tree.block_map());
+        if brick_levels {
+            let words = tree.brick_tags();
+            let map = BrickLevels {
+                words: &words,
+                levels: tree.brick_levels(),
+            };
             let space = space.with_reach(Blocks { map, leaf_level });
             unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
         } else {
@@ -1049,8 +1048,8 @@ mod tests {
 
     /// The AVX2 walk, for the shared check; it runs wherever the CPU has
     /// AVX2, also where the renderer would take the AVX-512 walk. The
-    /// octree's blocks come from the block map (`BLOCKS`) or the byte map,
-    /// whatever the lattice size.
+    /// octree's blocks come from the brick levels (`BLOCKS`) or the byte
+    /// map, whatever the lattice size.
     struct Avx2<const BLOCKS: bool>;
 
     impl<const BLOCKS: bool> super::super::lane_check::LaneWalk for Avx2<BLOCKS> {

@@ -56,7 +56,7 @@ use crate::classify::plane::CellTests;
 use crate::filter::coeffs::Coefficient;
 use crate::lattice::Bricked;
 use crate::octree::distance::Proximity;
-use crate::octree::{OCCUPIED, Octree, TAGGED};
+use crate::octree::{Octree, TAGGED};
 use crate::render::stats::Counters;
 
 const LANES: usize = 8;
@@ -259,8 +259,10 @@ impl<'a, R> Space<'a, R> {
 /// empty space around it reaches, and the box a lane may jump over from it:
 /// the lane form of [`super::EmptySpace`].
 trait LaneReach {
-    /// Each lane of `go`'s byte, from its cell's bricked slot.
-    unsafe fn byte(&self, l: &Lanes, slot: __m512i, go: __mmask8) -> __m512i;
+    /// Each lane of `go`'s byte, from its cell's bricked slot, and the
+    /// tag words of the lanes' bricks where the byte came from them (for
+    /// the tagged-cell test, which then need not gather them again).
+    unsafe fn byte(&self, l: &Lanes, slot: __m512i, go: __mmask8) -> (__m512i, Option<__m512i>);
     /// The lanes whose byte marks a tagged cell, and each lane's reach
     /// (what [`LaneReach::exit`] takes; that of the cell alone where
     /// tagged).
@@ -295,8 +297,8 @@ unsafe fn gather_bytes(bytes: &[u8], index: __m512i, go: __mmask8) -> __m512i {
 }
 
 /// The octree's aligned blocks ([`super::OctreeBlocks`]): a block level
-/// per cell, from the flattened skip map (a byte per cell) or from the
-/// octree's map per 2³ block ([`Octree::block_map`], a quarter the size).
+/// per cell, from the flattened skip map (a byte per cell) or from a byte
+/// per 4³ brick with the brick's tag word ([`BrickLevels`]).
 struct Blocks<M> {
     map: M,
     leaf_level: __m512i,
@@ -304,8 +306,9 @@ struct Blocks<M> {
 
 /// Where [`Blocks`] reads each lane's skip byte.
 trait SkipBytes {
-    /// The skip byte of each lane of `go`, from its cell's bricked slot.
-    unsafe fn byte(&self, slot: __m512i, go: __mmask8) -> __m512i;
+    /// The skip byte of each lane of `go`, from its cell's bricked slot,
+    /// and the brick's tag words where they were read for it.
+    unsafe fn byte(&self, slot: __m512i, go: __mmask8) -> (__m512i, Option<__m512i>);
 }
 
 /// The flattened skip map, a byte per cell ([`Octree::skip_map`]).
@@ -313,78 +316,79 @@ struct ByteMap<'a>(&'a [u8]);
 
 impl SkipBytes for ByteMap<'_> {
     #[inline(always)]
-    unsafe fn byte(&self, slot: __m512i, go: __mmask8) -> __m512i {
+    unsafe fn byte(&self, slot: __m512i, go: __mmask8) -> (__m512i, Option<__m512i>) {
         // SAFETY: called only from the walk, which runs with the features;
         // a lattice cell's slot lies in the map (`layout_fits`).
-        unsafe { gather_bytes(self.0, slot, go) }
+        (unsafe { gather_bytes(self.0, slot, go) }, None)
     }
 }
 
-/// The octree's entries per 2³ block ([`Octree::block_map`]): for a large
-/// lattice, whose byte map the walk's gathers read far out of cache. The
-/// same bytes from a quarter of the memory (teapot 2.9 MB against 11.5),
-/// for a few more instructions a step. Single thread, 3 alternating runs
-/// of 4 frames against the byte map: traverse teapot 101.4–102.6 →
-/// 96.9–99.4 ms, cranium 61.6–64.3 → 58.1–59.6; but the sphere (a 262 KB
-/// byte map, in cache) 26.7–26.9 → 28.0–28.3 (4 runs of 10), so small
-/// lattices keep the byte map ([`BLOCK_MAP_ABOVE`]).
-struct BlockMap<'a>(&'a [u16]);
+/// The octree's levels per brick ([`Octree::brick_levels`]) with the
+/// bricks' tag words ([`Octree::brick_tags`]): for a large lattice, whose
+/// byte map the walk's gathers read far out of cache, the same bytes from
+/// a byte per 64 cells (the teapot's 180 KB, in cache) and the tag words
+/// (a bit per cell), which the tagged-cell test reads anyway and so
+/// takes from here ([`tagged_slot`]). Against the octree's former map
+/// of a `u16` per 2³ block (2.9 MB on the teapot), whose gather held a
+/// quarter of the walk's samples on the teapot (`perf record`), two
+/// threads, four alternating rounds of 20 frames on a Zen 4: traverse
+/// stage teapot 103.7–122.0 → 100.3–108.9 ms CPU, cranium 67.4–77.5 →
+/// 60.6–71.3; single thread, eight rounds of 5 teapot frames: 105–134
+/// (median 112.6) → 101–114 (107). The sphere's byte map (262 KB) is as
+/// fast either way (traverse 34.4–34.6 ms in quiet rounds of both), so
+/// small lattices keep it ([`BRICK_LEVELS_ABOVE`]).
+struct BrickLevels<'a> {
+    words: &'a [u64],
+    levels: &'a [u8],
+}
 
-impl SkipBytes for BlockMap<'_> {
-    /// [`Octree::skip_byte_from_blocks`] per lane.
+impl SkipBytes for BrickLevels<'_> {
+    /// [`crate::octree::decode_brick`] per lane.
     #[inline(always)]
-    unsafe fn byte(&self, slot: __m512i, go: __mmask8) -> __m512i {
+    unsafe fn byte(&self, slot: __m512i, go: __mmask8) -> (__m512i, Option<__m512i>) {
         // SAFETY: called only from the walk, which runs with the features;
-        // a lattice cell's slot has its block's entry in the map, whose
-        // length is a multiple of 8 (`layout_fits`), so the dword holding
-        // it does too.
+        // a lattice cell's brick has a tag word and a level, whose table's
+        // length is a multiple of 4 (`layout_fits`).
         unsafe {
-            let bit_at = |from: u32, to: u32| {
-                let b = _mm512_srlv_epi64(slot, _mm512_set1_epi64((from - to) as i64));
-                _mm512_and_si512(b, _mm512_set1_epi64(1 << to))
-            };
-            // [`crate::octree::block_slot`]: bits 1, 3, 5 of the slot.
-            let entry = _mm512_or_si512(
-                _mm512_slli_epi64::<3>(_mm512_srli_epi64::<6>(slot)),
-                _mm512_or_si512(bit_at(1, 0), _mm512_or_si512(bit_at(3, 1), bit_at(5, 2))),
-            );
-            let dword = _mm512_mask_i64gather_epi32::<4>(
-                _mm256_setzero_si256(),
+            let brick = _mm512_srli_epi64::<6>(slot);
+            let k = _mm512_and_si512(slot, _mm512_set1_epi64(63));
+            let word = _mm512_mask_i64gather_epi64::<8>(
+                _mm512_setzero_si512(),
                 go,
-                _mm512_srli_epi64::<1>(entry),
-                self.0.as_ptr() as *const i32,
+                brick,
+                self.words.as_ptr() as *const i64,
             );
-            let shift = _mm512_slli_epi64::<4>(_mm512_and_si512(entry, _mm512_set1_epi64(1)));
-            let e = _mm512_and_si512(
-                _mm512_srlv_epi64(_mm512_cvtepu32_epi64(dword), shift),
-                _mm512_set1_epi64(0xFFFF),
+            let level = gather_bytes(self.levels, brick, go);
+            let one = _mm512_set1_epi64(1);
+            let tagged = _mm512_test_epi64_mask(_mm512_srlv_epi64(word, k), one);
+            // The 2³ block's cells: 0x0033_0033 << (k & 0b10_1010).
+            let block = _mm512_sllv_epi64(
+                _mm512_set1_epi64(0x0033_0033),
+                _mm512_and_si512(k, _mm512_set1_epi64(0b10_1010)),
             );
-            // [`crate::octree::cell_bit`]: bits 0, 2, 4 of the slot.
-            let bit = _mm512_or_si512(bit_at(0, 0), _mm512_or_si512(bit_at(2, 1), bit_at(4, 2)));
-            let occupied = _mm512_cmpge_epu64_mask(e, _mm512_set1_epi64(OCCUPIED as i64));
-            let tagged = _mm512_test_epi64_mask(_mm512_srlv_epi64(e, bit), _mm512_set1_epi64(1));
-            // Occupied: TAGGED or 0; empty: the level.
-            let occ = _mm512_maskz_mov_epi64(tagged, _mm512_set1_epi64(TAGGED as i64));
-            _mm512_mask_mov_epi64(e, occupied, occ)
+            let occupied = _mm512_test_epi64_mask(word, block);
+            let byte = _mm512_maskz_mov_epi64(!occupied, level);
+            let byte = _mm512_mask_mov_epi64(byte, tagged, _mm512_set1_epi64(TAGGED as i64));
+            (byte, Some(word))
         }
     }
 }
 
-/// Skip-map bytes above which the octree walk reads the block map: about
-/// where the byte map leaves a core's L2 cache (1–4 MiB on the machines
-/// measured). The sphere's 262 KB stays below, the cranium's 7 MB and the
-/// teapot's 11.5 MB above.
-const BLOCK_MAP_ABOVE: usize = 2 << 20;
+/// Skip-map bytes above which the octree walk reads the brick levels:
+/// about where the byte map leaves a core's L2 cache (1–4 MiB on the
+/// machines measured). The sphere's 262 KB stays below, the cranium's 7 MB
+/// and the teapot's 11.5 MB above.
+const BRICK_LEVELS_ABOVE: usize = 2 << 20;
 
 /// Whether the lane walks (this one and [`super::avx2`]'s) read `tree`'s
-/// block map rather than its byte map ([`BLOCK_MAP_ABOVE`]).
-pub(super) fn reads_block_map(tree: &Octree) -> bool {
-    tree.skip_map().len() > BLOCK_MAP_ABOVE
+/// brick levels rather than its byte map ([`BRICK_LEVELS_ABOVE`]).
+pub(super) fn reads_brick_levels(tree: &Octree) -> bool {
+    tree.skip_map().len() > BRICK_LEVELS_ABOVE
 }
 
 impl<M: SkipBytes> LaneReach for Blocks<M> {
     #[inline(always)]
-    unsafe fn byte(&self, _: &Lanes, slot: __m512i, go: __mmask8) -> __m512i {
+    unsafe fn byte(&self, _: &Lanes, slot: __m512i, go: __mmask8) -> (__m512i, Option<__m512i>) {
         // SAFETY: as the caller guarantees.
         unsafe { self.map.byte(slot, go) }
     }
@@ -424,7 +428,7 @@ impl LaneReach for Cubes<'_> {
     /// ([`crate::octree::distance::octant`]: bit `a` when the direction
     /// points down axis `a`).
     #[inline(always)]
-    unsafe fn byte(&self, l: &Lanes, slot: __m512i, go: __mmask8) -> __m512i {
+    unsafe fn byte(&self, l: &Lanes, slot: __m512i, go: __mmask8) -> (__m512i, Option<__m512i>) {
         // SAFETY: as above; the lanes of `go` hold cells of the lattice,
         // whose slots lie in each octant's map (`distance_layout_fits`).
         unsafe {
@@ -433,7 +437,7 @@ impl LaneReach for Cubes<'_> {
                 let down = _mm512_cmp_pd_mask::<_CMP_LT_OQ>(l.du[a], _mm512_setzero_pd());
                 index = _mm512_mask_add_epi64(index, down, index, self.octant_step[a]);
             }
-            gather_bytes(self.bytes, index, go)
+            (gather_bytes(self.bytes, index, go), None)
         }
     }
 
@@ -515,7 +519,8 @@ pub(crate) unsafe fn bricked_index(bricks: &[__m512i; 2], cell: &[__m512i; 3]) -
 
 /// [`crate::classify::tagged::TaggedIndex::slot`] per lane of `go`, from
 /// the index's words and ranks and each lane's bricked index `at`: the
-/// lanes whose cell is tagged, and their slots.
+/// lanes whose cell is tagged, and their slots. `gathered`: the lanes'
+/// words of `words`, where the caller has them already.
 ///
 /// # Safety
 /// AVX-512 F, DQ and VPOPCNTDQ; every lane of `go` indexes a cell of the
@@ -525,6 +530,7 @@ pub(crate) unsafe fn tagged_slot(
     (words, rank): (&[u64], &[u32]),
     at: __m512i,
     go: __mmask8,
+    gathered: Option<__m512i>,
 ) -> (__mmask8, __m512i) {
     // SAFETY: as the caller guarantees; a lattice cell's brick has a word
     // and a rank.
@@ -532,12 +538,14 @@ pub(crate) unsafe fn tagged_slot(
         let one = _mm512_set1_epi64(1);
         let brick = _mm512_srli_epi64::<6>(at);
         let bit = _mm512_and_si512(at, _mm512_set1_epi64(63));
-        let word = _mm512_mask_i64gather_epi64::<8>(
-            _mm512_setzero_si512(),
-            go,
-            brick,
-            words.as_ptr() as *const i64,
-        );
+        let word = gathered.unwrap_or_else(|| {
+            _mm512_mask_i64gather_epi64::<8>(
+                _mm512_setzero_si512(),
+                go,
+                brick,
+                words.as_ptr() as *const i64,
+            )
+        });
         let has = _mm512_mask_test_epi64_mask(go, _mm512_srlv_epi64(word, bit), one);
         let before = _mm512_cvtepu32_epi64(_mm512_mask_i64gather_epi32::<4>(
             _mm256_setzero_si256(),
@@ -848,7 +856,7 @@ unsafe fn step<R: LaneReach>(
 
         let slot = brick_slot(s, &l.cell);
         // SAFETY: the lanes of `go` hold cells of the lattice.
-        let byte = s.reach.byte(l, slot, go);
+        let (byte, word) = s.reach.byte(l, slot, go);
         let (tagged, reach) = s.reach.reach(go, byte);
 
         // Steps with no lane at a tagged cell skip the segments and the
@@ -869,7 +877,7 @@ unsafe fn step<R: LaneReach>(
                     // SAFETY (here and the mask's gather): the lanes of `go`
                     // hold lattice cells; a tagged cell's slot is below the
                     // tag count, the masks' length.
-                    let (has, index) = tagged_slot((words, rank), slot, go);
+                    let (has, index) = tagged_slot((words, rank), slot, go, word);
                     // With planes, each cell's mask and plane are one
                     // record ([`CellTests`]): the plane's gathers read the
                     // line the mask's brought in.
@@ -985,7 +993,9 @@ pub fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
 pub(super) fn layout_fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
     tree.tags().cells == ctx.lattice.cells
         && tree.skip_map().len() == tree.bricked().len()
-        && tree.block_map().len() * 8 == tree.bricked().len()
+        && tree.brick_levels().len() * 64 >= tree.bricked().len()
+        && tree.brick_levels().len().is_multiple_of(4)
+        && tree.brick_tags().len() * 64 == tree.bricked().len()
         && masks_fit(ctx, tree.bricked())
 }
 
@@ -1051,12 +1061,13 @@ pub unsafe fn walk_octree<T: Coefficient>(
     record: &mut Queue,
     c: &mut Counters,
 ) {
-    let block_map = reads_block_map(tree.0);
+    let brick_levels = reads_brick_levels(tree.0);
     // SAFETY: the caller's contract.
-    unsafe { walk_octree_on(ctx, tree, block_map, rays, input, solve, record, c) }
+    unsafe { walk_octree_on(ctx, tree, brick_levels, rays, input, solve, record, c) }
 }
 
-/// [`walk_octree`] reading the block map (`block_map`) or the byte map.
+/// [`walk_octree`] reading the brick levels (`brick_levels`) or the byte
+/// map.
 ///
 /// # Safety
 /// [`fits`] must be true.
@@ -1065,7 +1076,7 @@ pub unsafe fn walk_octree<T: Coefficient>(
 unsafe fn walk_octree_on<T: Coefficient>(
     ctx: &Ctx<T>,
     (tree, leaf_level): (&Octree, u32),
-    block_map: bool,
+    brick_levels: bool,
     rays: &mut Rays,
     input: &[u32],
     solve: &mut Queue,
@@ -1086,8 +1097,18 @@ unsafe fn walk_octree_on<T: Coefficient>(
     let leaf_level = _mm512_set1_epi64(leaf_level as i64);
     STAGED.with_borrow_mut(|staged| {
         // SAFETY (both): the caller checked the features.
-        if block_map {
-            let map = BlockMap(tree.block_map());
+        let words = tree.brick_tags();
+        // The tagged-cell test takes the words the skip bytes were read
+        // with: they must be the index's own (they are, in every
+        // preparation; the byte map serves any other).
+        let shared = space
+            .masks
+            .is_none_or(|(w, _, _)| std::ptr::eq(w.as_ptr(), words.as_ptr()));
+        if brick_levels && shared {
+            let map = BrickLevels {
+                words: &words,
+                levels: tree.brick_levels(),
+            };
             let space = space.with_reach(Blocks { map, leaf_level });
             unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
         } else {
@@ -1250,7 +1271,8 @@ mod tests {
     }
 
     /// The AVX-512 walk, for the shared check: the octree's blocks read from
-    /// the block map (`BLOCKS`) or the byte map, whatever the lattice size.
+    /// the brick levels (`BLOCKS`) or the byte map, whatever the lattice
+    /// size.
     struct Wide<const BLOCKS: bool>;
 
     impl<const BLOCKS: bool> super::super::lane_check::LaneWalk for Wide<BLOCKS> {
@@ -1263,6 +1285,12 @@ mod tests {
             record: &mut Queue,
             c: &mut Counters,
         ) {
+            // The brick levels are read only with the index's own words.
+            let words = tree.0.brick_tags();
+            assert!(
+                ctx.masks
+                    .is_none_or(|m| std::ptr::eq(m.parts().0.words().0.as_ptr(), words.as_ptr()))
+            );
             // SAFETY: the caller's contract.
             unsafe { walk_octree_on(ctx, tree, BLOCKS, rays, input, solve, record, c) }
         }
