@@ -333,8 +333,9 @@ impl SkipBytes for ByteMap<'_> {
 /// quarter of the walk's samples on the teapot (`perf record`), two
 /// threads, four alternating rounds of 20 frames on a Zen 4: traverse
 /// stage teapot 103.7–122.0 → 100.3–108.9 ms CPU, cranium 67.4–77.5 →
-/// 60.6–71.3; single thread, eight rounds of 5 teapot frames: 105–134
-/// (median 112.6) → 101–114 (107). The sphere's byte map (262 KB) is as
+/// 60.6–71.3; single thread, eight rounds of 5 teapot frames, before
+/// the words were taken from here: 105–134 (median 112.6) → 101–114
+/// (107). The sphere's byte map (262 KB) is as
 /// fast either way (traverse 34.4–34.6 ms in quiet rounds of both), so
 /// small lattices keep it ([`BRICK_LEVELS_ABOVE`]).
 struct BrickLevels<'a> {
