@@ -155,6 +155,11 @@ impl Octree {
         self.brick_tags.clone()
     }
 
+    /// [`Octree::brick_tags`] borrowed, for lane code that gathers them.
+    pub fn brick_tag_words(&self) -> &[u64] {
+        &self.brick_tags
+    }
+
     /// Height of the tree: the root is level `top()`.
     pub fn top(&self) -> u32 {
         self.levels.len() as u32
@@ -341,11 +346,20 @@ fn flatten(tags: &Tags, tag_words: &[u64], brick_levels: &[u8], bricked: &Bricke
 
 /// The brick bits of the 2³ block holding brick cell `k` (bit `x | y << 2 |
 /// z << 4` for brick coordinates 0..4): the block's first cell clears each
-/// coordinate's low bit, and its eight cells add 0 or 1 to each.
+/// coordinate's low bit ([`BLOCK_ORIGIN_BITS`]), and its eight cells add 0
+/// or 1 to each ([`FIRST_BLOCK_CELLS`]). The lane walks shift the same
+/// constants.
 #[inline(always)]
 fn block_cells(k: usize) -> u64 {
-    0x0033_0033u64 << (k & 0b10_1010)
+    FIRST_BLOCK_CELLS << (k & BLOCK_ORIGIN_BITS)
 }
+
+/// The brick bits of the 2³ block at the brick's origin.
+pub const FIRST_BLOCK_CELLS: u64 = 0x0033_0033;
+
+/// The bits of a brick cell index `k` that locate its 2³ block (each
+/// coordinate's high bit).
+pub const BLOCK_ORIGIN_BITS: usize = 0b10_1010;
 
 #[cfg(test)]
 mod tests {

@@ -30,14 +30,14 @@ use std::sync::OnceLock;
 use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
 use super::wide::{
-    CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks, lane_planes,
-    layout_fits, reads_brick_levels,
+    BrickLevels, CHUNK, Col, SPAN_ROWS, STAGED, Staged, distance_layout_fits, lane_masks,
+    lane_planes, layout_fits, reads_brick_levels,
 };
 use crate::classify::bezier::SUB;
 use crate::classify::plane::{self, CellTests};
 use crate::filter::coeffs::Coefficient;
 use crate::octree::distance::Proximity;
-use crate::octree::{Octree, TAGGED};
+use crate::octree::{BLOCK_ORIGIN_BITS, FIRST_BLOCK_CELLS, Octree, TAGGED};
 use crate::render::stats::Counters;
 
 const LANES: usize = 4;
@@ -337,16 +337,10 @@ impl SkipBytes for ByteMap<'_> {
 }
 
 /// The octree's levels per brick with the bricks' tag words
-/// ([`super::wide`]'s `BrickLevels`), for the lattices
-/// [`reads_brick_levels`] picks. `SNELL_ISA=avx2`, two threads, four
+/// ([`BrickLevels`]), for the lattices [`reads_brick_levels`] picks. `SNELL_ISA=avx2`, two threads, four
 /// alternating rounds of 10 teapot frames on a Zen 4 against the octree's
 /// former map of a `u16` per 2³ block: traverse stage 146.5–162.8 →
 /// 135.3–153.4 ms CPU (better in three rounds of four).
-struct BrickLevels<'a> {
-    words: &'a [u64],
-    levels: &'a [u8],
-}
-
 impl SkipBytes for BrickLevels<'_> {
     /// [`crate::octree::decode_brick`] per lane.
     #[inline(always)]
@@ -367,10 +361,10 @@ impl SkipBytes for BrickLevels<'_> {
             let one = _mm256_set1_epi64x(1);
             let zero = _mm256_setzero_si256();
             let tagged = _mm256_cmpeq_epi64(_mm256_and_si256(_mm256_srlv_epi64(word, k), one), one);
-            // The 2³ block's cells: 0x0033_0033 << (k & 0b10_1010).
+            // The 2³ block's cells (`octree::block_cells`).
             let block = _mm256_sllv_epi64(
-                _mm256_set1_epi64x(0x0033_0033),
-                _mm256_and_si256(k, _mm256_set1_epi64x(0b10_1010)),
+                _mm256_set1_epi64x(FIRST_BLOCK_CELLS as i64),
+                _mm256_and_si256(k, _mm256_set1_epi64x(BLOCK_ORIGIN_BITS as i64)),
             );
             let empty = _mm256_cmpeq_epi64(_mm256_and_si256(word, block), zero);
             let byte = _mm256_and_si256(empty, level);
@@ -889,11 +883,7 @@ unsafe fn walk_octree_on<T: Coefficient>(
     STAGED.with_borrow_mut(|staged| {
         // SAFETY (both): the caller checked the features.
         if brick_levels {
-            let words = tree.brick_tags();
-            let map = BrickLevels {
-                words: &words,
-                levels: tree.brick_levels(),
-            };
+            let map = BrickLevels::of(tree);
             let space = space.with_reach(Blocks { map, leaf_level });
             unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
         } else {

@@ -56,7 +56,7 @@ use crate::classify::plane::CellTests;
 use crate::filter::coeffs::Coefficient;
 use crate::lattice::Bricked;
 use crate::octree::distance::Proximity;
-use crate::octree::{Octree, TAGGED};
+use crate::octree::{BLOCK_ORIGIN_BITS, FIRST_BLOCK_CELLS, Octree, TAGGED};
 use crate::render::stats::Counters;
 
 const LANES: usize = 8;
@@ -338,9 +338,18 @@ impl SkipBytes for ByteMap<'_> {
 /// (107). The sphere's byte map (262 KB) is as
 /// fast either way (traverse 34.4–34.6 ms in quiet rounds of both), so
 /// small lattices keep it ([`BRICK_LEVELS_ABOVE`]).
-struct BrickLevels<'a> {
-    words: &'a [u64],
-    levels: &'a [u8],
+pub(super) struct BrickLevels<'a> {
+    pub(super) words: &'a [u64],
+    pub(super) levels: &'a [u8],
+}
+
+impl<'a> BrickLevels<'a> {
+    pub(super) fn of(tree: &'a Octree) -> Self {
+        BrickLevels {
+            words: tree.brick_tag_words(),
+            levels: tree.brick_levels(),
+        }
+    }
 }
 
 impl SkipBytes for BrickLevels<'_> {
@@ -362,10 +371,10 @@ impl SkipBytes for BrickLevels<'_> {
             let level = gather_bytes(self.levels, brick, go);
             let one = _mm512_set1_epi64(1);
             let tagged = _mm512_test_epi64_mask(_mm512_srlv_epi64(word, k), one);
-            // The 2³ block's cells: 0x0033_0033 << (k & 0b10_1010).
+            // The 2³ block's cells (`octree::block_cells`).
             let block = _mm512_sllv_epi64(
-                _mm512_set1_epi64(0x0033_0033),
-                _mm512_and_si512(k, _mm512_set1_epi64(0b10_1010)),
+                _mm512_set1_epi64(FIRST_BLOCK_CELLS as i64),
+                _mm512_and_si512(k, _mm512_set1_epi64(BLOCK_ORIGIN_BITS as i64)),
             );
             let occupied = _mm512_test_epi64_mask(word, block);
             let byte = _mm512_maskz_mov_epi64(!occupied, level);
@@ -996,7 +1005,7 @@ pub(super) fn layout_fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
         && tree.skip_map().len() == tree.bricked().len()
         && tree.brick_levels().len() * 64 >= tree.bricked().len()
         && tree.brick_levels().len().is_multiple_of(4)
-        && tree.brick_tags().len() * 64 == tree.bricked().len()
+        && tree.brick_tag_words().len() * 64 == tree.bricked().len()
         && masks_fit(ctx, tree.bricked())
 }
 
@@ -1098,18 +1107,14 @@ unsafe fn walk_octree_on<T: Coefficient>(
     let leaf_level = _mm512_set1_epi64(leaf_level as i64);
     STAGED.with_borrow_mut(|staged| {
         // SAFETY (both): the caller checked the features.
-        let words = tree.brick_tags();
+        let map = BrickLevels::of(tree);
         // The tagged-cell test takes the words the skip bytes were read
         // with: they must be the index's own (they are, in every
         // preparation; the byte map serves any other).
         let shared = space
             .masks
-            .is_none_or(|(w, _, _)| std::ptr::eq(w.as_ptr(), words.as_ptr()));
+            .is_none_or(|(w, _, _)| std::ptr::eq(w.as_ptr(), map.words.as_ptr()));
         if brick_levels && shared {
-            let map = BrickLevels {
-                words: &words,
-                levels: tree.brick_levels(),
-            };
             let space = space.with_reach(Blocks { map, leaf_level });
             unsafe { walk(ctx, &space, staged, rays, input, solve, record, c) }
         } else {
@@ -1287,7 +1292,7 @@ mod tests {
             c: &mut Counters,
         ) {
             // The brick levels are read only with the index's own words.
-            let words = tree.0.brick_tags();
+            let words = tree.0.brick_tag_words();
             assert!(
                 ctx.masks
                     .is_none_or(|m| std::ptr::eq(m.parts().0.words().0.as_ptr(), words.as_ptr()))
