@@ -336,7 +336,8 @@ impl SkipBytes for ByteMap<'_> {
 /// 60.6–71.3; single thread, eight rounds of 5 teapot frames, before
 /// the words were taken from here: 105–134 (median 112.6) → 101–114
 /// (107). The sphere's byte map (262 KB) is as
-/// fast either way (traverse 34.4–34.6 ms in quiet rounds of both), so
+/// fast either way (traverse 34.45–34.90 / 34.39–34.52 ms in the quiet
+/// rounds of five alternating), so
 /// small lattices keep it ([`BRICK_LEVELS_ABOVE`]).
 pub(super) struct BrickLevels<'a> {
     pub(super) words: &'a [u64],
