@@ -398,3 +398,76 @@ fn peer_comparison() {
     assert!(updated.contains("× faster, frame"), "{updated}");
     assert!(out.join("peer.md").is_file());
 }
+
+/// `snell bench --targets` at a small size: every target gets a row with a
+/// measured value, no verdict (not at the targets' size), the same section in
+/// `targets.md` and the updated markdown file, whose text outside the
+/// markers is kept.
+#[test]
+fn targets_report_every_target() {
+    let t = Tmp::new("targets");
+    let md = t.path("B.md");
+    std::fs::write(&md, "# mine\n\nkept\n").unwrap();
+    let out = t.path("out");
+    let o = snell(&[
+        "bench",
+        "--targets",
+        "--targets-size",
+        "24",
+        "--prefilter-size",
+        "24",
+        "--rounds",
+        "2",
+        "--frames",
+        "1",
+        "--targets-skip-peer",
+        "--out",
+        s(&out),
+        "--update",
+        s(&md),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("targets.json")).unwrap()).unwrap();
+    let rows = v["rows"].as_array().unwrap();
+    let names: Vec<&str> = rows.iter().map(|r| r["target"].as_str().unwrap()).collect();
+    for want in [
+        "sphere frame",
+        "teapot frame",
+        "cranium frame",
+        "sphere: octree",
+        "cranium: octree",
+        "lobster: octree",
+        "teapot: octree",
+        "prefilter",
+    ] {
+        assert!(
+            names.iter().any(|n| n.starts_with(want)),
+            "{want} missing from {names:?}"
+        );
+    }
+    for r in rows {
+        let value = r["value"].as_f64().unwrap();
+        assert!(value > 0.0 && value.is_finite(), "{r}");
+        assert_eq!(r["rounds"].as_array().unwrap().len(), 2, "{r}");
+        assert!(r["met"].is_null(), "a verdict at 24×24: {r}");
+    }
+    // The octree and step 0.1 find the same crossings on every dataset.
+    for r in rows.iter().filter(|r| r["issue"] == 4) {
+        let d = r["detail"].as_str().unwrap();
+        let per_ray: Vec<f64> = d
+            .split("events per ray ")
+            .nth(1)
+            .unwrap()
+            .split(", ")
+            .map(|x| x.split(' ').next().unwrap().parse().unwrap())
+            .collect();
+        assert!((per_ray[0] - per_ray[1]).abs() < 0.05, "{d}");
+    }
+    assert!(v["skipped"][0].as_str().unwrap().contains("POV-Ray"));
+    let section = std::fs::read_to_string(out.join("targets.md")).unwrap();
+    assert_eq!(section.matches("\n| ").count(), rows.len() + 1, "{section}");
+    let doc = std::fs::read_to_string(&md).unwrap();
+    assert!(doc.starts_with("# mine\n\nkept\n"), "{doc}");
+    assert!(doc.contains("<!-- bench:targets:begin -->") && doc.contains(section.trim()));
+}

@@ -34,6 +34,19 @@ pub fn cpu_model() -> Option<String> {
     describe_cpu(&std::fs::read_to_string("/proc/cpuinfo").ok()?)
 }
 
+/// The CPU family number of `/proc/cpuinfo` (AMD Zen 4: 25, Zen 5: 26).
+pub fn cpu_family() -> Option<u32> {
+    family_of(&std::fs::read_to_string("/proc/cpuinfo").ok()?)
+}
+
+fn family_of(cpuinfo: &str) -> Option<u32> {
+    let first = cpuinfo.split("\n\n").next()?;
+    first.lines().find_map(|l| {
+        let (k, v) = l.split_once(':')?;
+        (k.trim() == "cpu family").then(|| v.trim().parse().ok())?
+    })
+}
+
 /// The first processor's `model name`, followed by its `cpu family`,
 /// `model` and `cpu MHz` where present: virtual machines often report a
 /// bare name ("AMD EPYC") for hosts of different generations and clocks
@@ -227,6 +240,9 @@ mod tests {
         );
         assert_eq!(describe_cpu("cpu family\t: 6\nmodel\t: 85\n"), None);
         assert_eq!(describe_cpu(""), None);
+        // The first processor's family; none without the field.
+        assert_eq!(family_of(two), Some(25));
+        assert_eq!(family_of("model name\t: Some CPU\n"), None);
     }
 
     #[test]

@@ -21,6 +21,7 @@ pub mod report;
 pub mod results;
 mod runner;
 pub mod suite;
+pub mod targets;
 pub mod update;
 
 use std::path::{Path, PathBuf};

@@ -6,7 +6,7 @@ use std::time::Duration;
 
 use clap::Args as ClapArgs;
 
-use snell::bench::{self, DEFAULT_REPEATS, Observer, Options, Suite, peer};
+use snell::bench::{self, DEFAULT_REPEATS, Observer, Options, Suite, peer, targets};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -42,9 +42,34 @@ pub struct Args {
     /// Directory of the scene files.
     #[arg(long, default_value = "scenes")]
     pub scenes: PathBuf,
+    /// Measure every speed target of the product in one run and print each
+    /// with its verdict (issue 7's frame times, prefilter rate and POV-Ray
+    /// ratio, issue 4's octree over step 0.1 on every dataset): rounds over
+    /// all configurations, about 5 minutes with POV-Ray on 2 cores. Fills
+    /// the `bench:targets` section of --update.
+    #[arg(long, conflicts_with_all = ["suite", "peer"])]
+    pub targets: bool,
+    /// Rounds of --targets (each target's value is the median over rounds).
+    #[arg(long, default_value_t = 3, requires = "targets")]
+    pub rounds: usize,
+    /// Timed frames per configuration and round of --targets.
+    #[arg(long, default_value_t = 10, requires = "targets")]
+    pub frames: usize,
+    /// --targets without POV-Ray.
+    #[arg(long, requires = "targets")]
+    pub targets_skip_peer: bool,
+    /// Image side of --targets (tests use a small one; verdicts need 512).
+    #[arg(long, default_value_t = snell::bench::targets::TARGET_SIZE, hide = true)]
+    pub targets_size: u32,
+    /// Volume side of --targets' prefilter measurement.
+    #[arg(long, default_value_t = snell::bench::targets::PREFILTER_SIZE, hide = true)]
+    pub prefilter_size: usize,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    if a.targets {
+        return run_targets(&a);
+    }
     let suite = match (&a.suite, &a.peer) {
         (Some(name), _) => Some(Suite::by_name(name)?),
         (None, None) => Some(Suite::by_name("quick")?),
@@ -148,6 +173,44 @@ fn run_peer(a: &Args, name: &str) -> anyhow::Result<()> {
     }
     for w in &outcome.report.warnings {
         eprintln!("warning: {w}");
+    }
+    Ok(())
+}
+
+fn run_targets(a: &Args) -> anyhow::Result<()> {
+    if a.targets_size == 0 || a.prefilter_size == 0 {
+        anyhow::bail!("--targets-size and --prefilter-size must be at least 1");
+    }
+    let opts = targets::TargetOptions {
+        scenes_dir: a.scenes.clone(),
+        out_dir: a.out.clone(),
+        rounds: a.rounds,
+        frames: a.frames,
+        threads: a.threads.unwrap_or(peer::PEER_THREADS),
+        size: a.targets_size,
+        prefilter_size: a.prefilter_size,
+        peer: !a.targets_skip_peer,
+        update: a.update.clone(),
+        command: command_line(),
+    };
+    eprintln!(
+        "snell bench --targets: {} rounds over every target's configurations, {} threads, {}x{} (about 5 minutes on 2 cores with POV-Ray).",
+        opts.rounds, opts.threads, opts.size, opts.size
+    );
+    if cfg!(debug_assertions) {
+        eprintln!("warning: debug build: the times mean nothing, use --release");
+    }
+    let mut bar = Bar::new();
+    let outcome = targets::run_targets(&opts, &mut bar)?;
+    bar.done();
+    print!("{}", targets::section(&outcome.report));
+    eprintln!(
+        "{} targets in {}; wrote:",
+        outcome.report.rows.len(),
+        bench::report::fmt_duration(outcome.report.total_s)
+    );
+    for p in &outcome.written {
+        eprintln!("  {}", p.display());
     }
     Ok(())
 }
