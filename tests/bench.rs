@@ -470,4 +470,8 @@ fn targets_report_every_target() {
     let doc = std::fs::read_to_string(&md).unwrap();
     assert!(doc.starts_with("# mine\n\nkept\n"), "{doc}");
     assert!(doc.contains("<!-- bench:targets:begin -->") && doc.contains(section.trim()));
+    for bad in ["--rounds", "--frames"] {
+        let o = snell(&["bench", "--targets", bad, "0", "--out", s(&out)]);
+        assert_fails(&o, "--rounds and --frames must be at least 1");
+    }
 }

@@ -54,6 +54,8 @@ pub enum BenchError {
     NoRepeats,
     #[error("--threads must be at least 1")]
     NoThreads,
+    #[error("--rounds and --frames must be at least 1")]
+    NoRounds,
     #[error("cannot start {threads} worker threads: {msg}")]
     Threads { threads: usize, msg: String },
     #[error("{}: {source}", path.display())]

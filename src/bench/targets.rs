@@ -177,7 +177,7 @@ pub fn run_targets(
     observer: &mut dyn Observer,
 ) -> Result<TargetsOutcome, BenchError> {
     if opts.rounds == 0 || opts.frames == 0 {
-        return Err(BenchError::NoRepeats);
+        return Err(BenchError::NoRounds);
     }
     if opts.threads == 0 {
         return Err(BenchError::NoThreads);
