@@ -2,8 +2,9 @@
 //! one run, each printed with its verdict.
 //!
 //! The targets are of two kinds. Ratios (octree over fixed-step ray
-//! casting, snell over POV-Ray) do not depend much on the machine, so any run
-//! can judge them. Milliseconds per frame and voxels per second are set for
+//! casting, snell over POV-Ray) move less with the machine (though they do:
+//! on a Zen 4 host the octree frames lost more than the stepping ones), so
+//! every run judges them. Milliseconds per frame and voxels per second are set for
 //! one machine, the design card's 2-core AMD Zen 5 (CPU family 26): the same
 //! code ran 1.5–1.6× slower on a Zen 4 host (BENCHMARKS.md, *The same code on
 //! a Zen 4 host*), so the report names the CPU it ran on and whether it is
