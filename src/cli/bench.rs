@@ -45,7 +45,7 @@ pub struct Args {
     /// Measure every speed target of the product in one run and print each
     /// with its verdict (issue 7's frame times, prefilter rate and POV-Ray
     /// ratio, issue 4's octree over step 0.1 on every dataset): rounds over
-    /// all configurations, about 5 minutes with POV-Ray on 2 cores. Fills
+    /// all configurations, about 3 minutes with POV-Ray on 2 cores. Fills
     /// the `bench:targets` section of --update.
     #[arg(long, conflicts_with_all = ["suite", "peer"])]
     pub targets: bool,
@@ -194,7 +194,7 @@ fn run_targets(a: &Args) -> anyhow::Result<()> {
         command: command_line(),
     };
     eprintln!(
-        "snell bench --targets: {} rounds over every target's configurations, {} threads, {}x{} (about 5 minutes on 2 cores with POV-Ray).",
+        "snell bench --targets: {} rounds over every target's configurations, {} threads, {}x{} (about 3 minutes on 2 cores with POV-Ray).",
         opts.rounds, opts.threads, opts.size, opts.size
     );
     if cfg!(debug_assertions) {
