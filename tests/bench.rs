@@ -446,17 +446,33 @@ fn targets_report_every_target() {
             "{want} missing from {names:?}"
         );
     }
+    assert_eq!(rows.len(), 9, "{names:?}");
     for r in rows {
         let value = r["value"].as_f64().unwrap();
+        let rounds: Vec<f64> = r["rounds"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .map(|v| v.as_f64().unwrap())
+            .collect();
+        assert_eq!(rounds.len(), 2, "{r}");
+        // The value is the median of its rounds (of two: their mean).
+        assert!(
+            (value - 0.5 * (rounds[0] + rounds[1])).abs() <= 1e-9 * value,
+            "{r}"
+        );
         assert!(value > 0.0 && value.is_finite(), "{r}");
-        assert_eq!(r["rounds"].as_array().unwrap().len(), 2, "{r}");
         assert!(r["met"].is_null(), "a verdict at 24×24: {r}");
+        // Even this small, the octree beats stepping at 0.1.
+        if r["issue"] == 4 {
+            assert!(rounds.iter().all(|&x| x > 1.0), "{r}");
+        }
     }
     // The octree and step 0.1 find the same crossings on every dataset.
     for r in rows.iter().filter(|r| r["issue"] == 4) {
         let d = r["detail"].as_str().unwrap();
         let per_ray: Vec<f64> = d
-            .split("events per ray ")
+            .split("events per ray (round 1) ")
             .nth(1)
             .unwrap()
             .split(", ")
@@ -474,4 +490,13 @@ fn targets_report_every_target() {
         let o = snell(&["bench", "--targets", bad, "0", "--out", s(&out)]);
         assert_fails(&o, "--rounds and --frames must be at least 1");
     }
+    let o = snell(&[
+        "bench",
+        "--targets",
+        "--targets-size",
+        "0",
+        "--out",
+        s(&out),
+    ]);
+    assert_fails(&o, "--targets-size and --prefilter-size must be at least 1");
 }

@@ -56,6 +56,8 @@ pub enum BenchError {
     NoThreads,
     #[error("--rounds and --frames must be at least 1")]
     NoRounds,
+    #[error("--targets-size and --prefilter-size must be at least 1")]
+    NoTargetSize,
     #[error("cannot start {threads} worker threads: {msg}")]
     Threads { threads: usize, msg: String },
     #[error("{}: {source}", path.display())]

@@ -36,7 +36,8 @@ pub struct Args {
     /// Replace this suite's section of a markdown file (e.g. BENCHMARKS.md).
     #[arg(long, value_name = "BENCHMARKS.md")]
     pub update: Option<PathBuf>,
-    /// Worker threads (default: all cores; 2 for each renderer with --peer).
+    /// Worker threads (default: all cores; 2 for each renderer with --peer,
+    /// and 2 with --targets, whose verdicts need 2).
     #[arg(long)]
     pub threads: Option<usize>,
     /// Directory of the scene files.
@@ -47,7 +48,7 @@ pub struct Args {
     /// ratio, issue 4's octree over step 0.1 on every dataset): rounds over
     /// all configurations, about 3 minutes with POV-Ray on 2 cores. Fills
     /// the `bench:targets` section of --update.
-    #[arg(long, conflicts_with_all = ["suite", "peer"])]
+    #[arg(long, conflicts_with_all = ["suite", "peer", "repeats"])]
     pub targets: bool,
     /// Rounds of --targets (each target's value is the median over rounds).
     #[arg(long, default_value_t = 3, requires = "targets")]
@@ -59,10 +60,10 @@ pub struct Args {
     #[arg(long, requires = "targets")]
     pub targets_skip_peer: bool,
     /// Image side of --targets (tests use a small one; verdicts need 512).
-    #[arg(long, default_value_t = snell::bench::targets::TARGET_SIZE, hide = true)]
+    #[arg(long, default_value_t = snell::bench::targets::TARGET_SIZE, hide = true, requires = "targets")]
     pub targets_size: u32,
     /// Volume side of --targets' prefilter measurement.
-    #[arg(long, default_value_t = snell::bench::targets::PREFILTER_SIZE, hide = true)]
+    #[arg(long, default_value_t = snell::bench::targets::PREFILTER_SIZE, hide = true, requires = "targets")]
     pub prefilter_size: usize,
 }
 
@@ -178,15 +179,12 @@ fn run_peer(a: &Args, name: &str) -> anyhow::Result<()> {
 }
 
 fn run_targets(a: &Args) -> anyhow::Result<()> {
-    if a.targets_size == 0 || a.prefilter_size == 0 {
-        anyhow::bail!("--targets-size and --prefilter-size must be at least 1");
-    }
     let opts = targets::TargetOptions {
         scenes_dir: a.scenes.clone(),
         out_dir: a.out.clone(),
         rounds: a.rounds,
         frames: a.frames,
-        threads: a.threads.unwrap_or(peer::PEER_THREADS),
+        threads: a.threads.unwrap_or(targets::TARGET_THREADS),
         size: a.targets_size,
         prefilter_size: a.prefilter_size,
         peer: !a.targets_skip_peer,
