@@ -25,20 +25,10 @@ use std::time::{Duration, Instant};
 
 use criterion::{Criterion, SamplingMode, Throughput, criterion_group, criterion_main};
 
-use snell::filter::{Coeffs, Field, FilterKind};
+use snell::filter::{Coeffs, Field, FilterKind, PREFILTERED_NAMES as PREFILTERED};
 use snell::phantom::{PhantomFormat, SphereSpec};
 use snell::volume::Volume;
 use snell::with_support;
-
-const PREFILTERED: [&str; 7] = [
-    "bspline2",
-    "bspline3",
-    "bspline4",
-    "bspline5",
-    "bspline6",
-    "bspline7",
-    "smooth-bspline3",
-];
 
 const EVALUATED: [&str; 8] = [
     "linear",

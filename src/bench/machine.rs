@@ -40,10 +40,17 @@ pub fn cpu_family() -> Option<u32> {
 }
 
 fn family_of(cpuinfo: &str) -> Option<u32> {
-    let first = cpuinfo.split("\n\n").next()?;
-    first.lines().find_map(|l| {
+    first_processor_field(cpuinfo, "cpu family")?.parse().ok()
+}
+
+/// The non-empty value of `key` in the first processor's block of
+/// `/proc/cpuinfo` text (the others repeat it).
+fn first_processor_field<'a>(cpuinfo: &'a str, key: &str) -> Option<&'a str> {
+    cpuinfo.split("\n\n").next()?.lines().find_map(|l| {
         let (k, v) = l.split_once(':')?;
-        (k.trim() == "cpu family").then(|| v.trim().parse().ok())?
+        (k.trim() == key)
+            .then(|| v.trim())
+            .filter(|v| !v.is_empty())
     })
 }
 
@@ -53,16 +60,7 @@ fn family_of(cpuinfo: &str) -> Option<u32> {
 /// that ran the same code 1.5× apart (BENCHMARKS.md, *The same code on a
 /// Zen 4 host*), so a recorded time names the numbers that tell them apart.
 fn describe_cpu(cpuinfo: &str) -> Option<String> {
-    // Only the first processor's block: the others repeat it.
-    let first = cpuinfo.split("\n\n").next()?;
-    let field = |key: &str| {
-        first.lines().find_map(|l| {
-            let (k, v) = l.split_once(':')?;
-            (k.trim() == key)
-                .then(|| v.trim())
-                .filter(|v| !v.is_empty())
-        })
-    };
+    let field = |key: &str| first_processor_field(cpuinfo, key);
     let name = field("model name")?;
     let mut details = Vec::new();
     if let Some(f) = field("cpu family") {

@@ -28,7 +28,7 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::filter::{Coeffs, FilterKind};
+use crate::filter::{Coeffs, FilterKind, PREFILTERED_NAMES as PREFILTERED};
 use crate::phantom::{PhantomFormat, SphereSpec};
 use crate::prepare::Prepared;
 use crate::render::{self, RenderStats};
@@ -53,17 +53,6 @@ pub const TARGET_THREADS: usize = 2;
 
 /// Volume side of the prefilter target.
 pub const PREFILTER_SIZE: usize = 512;
-
-/// The prefiltered filters, each timed one pass per axis.
-const PREFILTERED: [&str; 7] = [
-    "bspline2",
-    "bspline3",
-    "bspline4",
-    "bspline5",
-    "bspline6",
-    "bspline7",
-    "smooth-bspline3",
-];
 
 /// Issue 7's steady-state frames: scene, traversal, the bound in ms. The
 /// scene files' own filters (bspline3 for the sphere, the paper's smoothing

@@ -38,6 +38,18 @@ pub const FILTER_NAMES: [&str; 9] = [
     "smooth-bspline3",
 ];
 
+/// The filters whose coefficients are prefiltered (the B-splines), in
+/// [`FILTER_NAMES`]' order.
+pub const PREFILTERED_NAMES: [&str; 7] = [
+    "bspline2",
+    "bspline3",
+    "bspline4",
+    "bspline5",
+    "bspline6",
+    "bspline7",
+    "smooth-bspline3",
+];
+
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FilterError {
     #[error(
