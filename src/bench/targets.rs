@@ -30,7 +30,7 @@ use serde::Serialize;
 
 use crate::filter::{Coeffs, FilterKind, PREFILTERED_NAMES as PREFILTERED};
 use crate::phantom::{PhantomFormat, SphereSpec};
-use crate::prepare::Prepared;
+use crate::prepare::{Cache, Prepared};
 use crate::render::{self, RenderStats};
 use crate::scene::{DEFAULT_CLASSIFY, Scene};
 use crate::volume::LoadOptions;
@@ -206,8 +206,13 @@ pub fn run_targets(
     let cpu_before = machine::cpu_snapshot();
     observer.begin(opts.rounds * (FRAMES.len() + 2 * SPEEDUPS.len()) + 1);
 
-    let mut rows = pool.install(|| frame_rows(opts, observer))?;
-    rows.extend(pool.install(|| speedup_rows(opts, observer))?);
+    // One cache for every scene: a volume and its field are loaded and
+    // prefiltered once, whichever rows use them (the sphere's frames and
+    // its speed-up; each dataset's step and octree renders).
+    let mut cache = Cache::new();
+    let mut rows = pool.install(|| frame_rows(opts, &mut cache, observer))?;
+    rows.extend(pool.install(|| speedup_rows(opts, &mut cache, observer))?);
+    drop(cache);
     observer.start("prefilter passes");
     rows.push(pool.install(|| prefilter_row(opts))?);
     observer.tick();
@@ -279,14 +284,19 @@ struct Measured {
 }
 
 impl Measured {
-    fn new(opts: &TargetOptions, file: &str, overrides: &[String]) -> Result<Self, BenchError> {
+    fn new(
+        opts: &TargetOptions,
+        cache: &mut Cache,
+        file: &str,
+        overrides: &[String],
+    ) -> Result<Self, BenchError> {
         let mut o = vec![
             format!("image.width={}", opts.size),
             format!("image.height={}", opts.size),
         ];
         o.extend_from_slice(overrides);
         let scene = Scene::load(&opts.scenes_dir.join(file), &o)?;
-        let prep = Prepared::for_scene(&scene, &LoadOptions::default())?;
+        let prep = cache.prepare(&scene, &LoadOptions::default())?;
         Ok(Measured { scene, prep })
     }
 
@@ -313,6 +323,7 @@ impl Measured {
 /// Issue 7's steady-state frame times, rounds over the four configurations.
 fn frame_rows(
     opts: &TargetOptions,
+    cache: &mut Cache,
     observer: &mut dyn Observer,
 ) -> Result<Vec<TargetRow>, BenchError> {
     let mut measured = Vec::new();
@@ -320,6 +331,7 @@ fn frame_rows(
         observer.start(&format!("{file} {traversal}: prepare and warm up"));
         let m = Measured::new(
             opts,
+            cache,
             file,
             &[
                 format!("render.traversal={traversal}"),
@@ -378,6 +390,7 @@ fn frame_rows(
 /// no crossing the step found.
 fn speedup_rows(
     opts: &TargetOptions,
+    cache: &mut Cache,
     observer: &mut dyn Observer,
 ) -> Result<Vec<TargetRow>, BenchError> {
     let with = |extra: &[&str]| {
@@ -396,8 +409,8 @@ fn speedup_rows(
     let mut pairs = Vec::new();
     for file in SPEEDUPS {
         observer.start(&format!("{file}: prepare step 0.1 and octree"));
-        let s = Measured::new(opts, file, &step)?;
-        let o = Measured::new(opts, file, &octree)?;
+        let s = Measured::new(opts, cache, file, &step)?;
+        let o = Measured::new(opts, cache, file, &octree)?;
         o.frame();
         pairs.push((s, o));
     }
@@ -617,6 +630,10 @@ fn judged(opts: &TargetOptions) -> bool {
     opts.size == TARGET_SIZE && opts.threads == TARGET_THREADS
 }
 
+/// The median of the rounds, the mean of the middle two for an even count:
+/// a target's value is a statistic of its rounds, not one of them (unlike
+/// [`super::results::TimeStats::of`], which picks a frame so that its stats
+/// can be shown with it).
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     match v.len() {
