@@ -37,7 +37,8 @@ pub struct Machine {
     pub snell_version: String,
     /// `release` or `debug`: debug timings mean nothing.
     pub build_profile: String,
-    /// `git describe --always --dirty` of the working directory, if any.
+    /// `git describe --always` of the working directory, with `-dirty`
+    /// when code (not Markdown) differs from it, if in a repository.
     pub git: Option<String>,
 }
 
