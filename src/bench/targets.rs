@@ -616,12 +616,36 @@ fn peer_row(opts: &TargetOptions, observer: &mut dyn Observer) -> Result<TargetR
         met: judged(opts).then(|| bound.holds(value)),
         machine_bound: false,
         detail: format!(
-            "medians of {} round-robin runs; every snell row: {}",
+            "medians of {} round-robin runs{}; every snell row: {}",
             opts.rounds,
+            best.map_or(String::new(), |b| frame_spreads(&outcome.report.rows, b)),
             every.join(", ")
         ),
         rounds: Vec::new(),
     })
+}
+
+/// The frame times behind ratio `r`, snell's row and POV-Ray's, as median
+/// and range, so that a ratio formed in a noisy spell shows it (one such
+/// run had snell's frames over 52.8–89.9 ms, BENCHMARKS.md).
+fn frame_spreads(rows: &[peer::PeerRow], r: &peer::SpeedRatio) -> String {
+    let frames = |renderer: &str, label: &str| {
+        rows.iter()
+            .find(|row| row.renderer == renderer && row.label == label)
+            .map(|row| {
+                let f = &row.frame_ms;
+                format!(
+                    "{} ms ({}–{})",
+                    fmt_ms(f.median),
+                    fmt_ms(f.min),
+                    fmt_ms(f.max)
+                )
+            })
+    };
+    match (frames("snell", &r.snell), frames("povray", &r.povray)) {
+        (Some(s), Some(p)) => format!(" (frames: snell {s}, POV-Ray {p})"),
+        _ => String::new(),
+    }
 }
 
 /// Whether the run is at the targets' conditions (512×512, 2 threads), so
@@ -792,5 +816,76 @@ mod tests {
         assert_eq!(median(vec![3.0, 1.0, 2.0]), 2.0);
         assert_eq!(median(vec![4.0, 1.0, 2.0, 3.0]), 2.5);
         assert!(median(Vec::new()).is_nan());
+    }
+
+    fn peer_row(renderer: &str, label: &str, frames: &[f64]) -> peer::PeerRow {
+        let stats = super::super::results::TimeStats::of(frames).unwrap().0;
+        peer::PeerRow {
+            renderer: renderer.into(),
+            label: label.into(),
+            settings: Vec::new(),
+            runs: frames.len(),
+            render_ms: stats.clone(),
+            prepare_ms: 0.0,
+            frame_ms: stats,
+            process_ms: None,
+            render_cpu_ms: None,
+            error: peer::PeerHitError {
+                refracted_pixels: 0,
+                p50: 0.0,
+                p90: 0.0,
+                p99: 0.0,
+                validity_mismatch: 0,
+                pixels: 0,
+            },
+            max_gradient: None,
+            gradient_estimate: None,
+            contained_by: None,
+            max_gradient_found: None,
+            command: String::new(),
+        }
+    }
+
+    #[test]
+    fn frame_spreads_name_both_rows_and_their_ranges() {
+        let rows = [
+            peer_row("snell", "distance+bezier bspline2", &[60.0, 90.0, 50.0]),
+            peer_row("snell", "octree+bezier bspline2", &[1.0, 2.0, 3.0]),
+            peer_row(
+                "povray",
+                "tricubic accuracy 1e-3",
+                &[1500.0, 1300.0, 2200.0],
+            ),
+        ];
+        let ratio = peer::SpeedRatio {
+            snell: "distance+bezier bspline2".into(),
+            povray: "tricubic accuracy 1e-3".into(),
+            frame: 25.0,
+            render: 25.0,
+            process: None,
+            snell_p50: 0.0,
+            povray_p50: 0.0,
+            snell_p90: 0.0,
+            povray_p90: 0.0,
+            lower_error: true,
+        };
+        assert_eq!(
+            frame_spreads(&rows, &ratio),
+            format!(
+                " (frames: snell {} ms ({}–{}), POV-Ray {} ms ({}–{}))",
+                fmt_ms(60.0),
+                fmt_ms(50.0),
+                fmt_ms(90.0),
+                fmt_ms(1500.0),
+                fmt_ms(1300.0),
+                fmt_ms(2200.0)
+            )
+        );
+        // A row that is not there leaves the detail as it was.
+        let missing = peer::SpeedRatio {
+            snell: "linear".into(),
+            ..ratio
+        };
+        assert_eq!(frame_spreads(&rows, &missing), "");
     }
 }
