@@ -21,11 +21,12 @@
 //! evaluation. All single-threaded except the prefilter, which uses every core.
 
 use std::hint::black_box;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use criterion::{Criterion, SamplingMode, Throughput, criterion_group, criterion_main};
 
-use snell::filter::{Coeffs, Field, FilterKind, PREFILTERED_NAMES as PREFILTERED};
+use snell::bench::prefilter_pass::PrefilterPasses;
+use snell::filter::{Field, FilterKind, PREFILTERED_NAMES as PREFILTERED};
 use snell::phantom::{PhantomFormat, SphereSpec};
 use snell::volume::Volume;
 use snell::with_support;
@@ -73,34 +74,19 @@ fn prefilter_256(c: &mut Criterion) {
 
 fn prefilter_pass_512(c: &mut Criterion) {
     let vol = sphere(512);
-    let grid = Coeffs::<f64>::from_volume(&vol);
+    let mut passes = PrefilterPasses::of(&vol);
     drop(vol);
-    let dims = grid.dims();
-    let origin = grid.interior_offset(0, 0, 0);
-    let strides = [grid.stride(0), grid.stride(1), grid.stride(2)];
-    let pristine = grid.data().to_vec();
-    let mut work = grid.data().to_vec();
-    drop(grid);
     let mut g = c.benchmark_group("prefilter-pass/512^3");
     g.sample_size(10);
     g.sampling_mode(SamplingMode::Flat);
     g.warm_up_time(Duration::from_secs(1));
     g.measurement_time(Duration::from_secs(5));
-    g.throughput(Throughput::Elements(dims.iter().product::<usize>() as u64));
+    g.throughput(Throughput::Elements(passes.voxels() as u64));
     for name in PREFILTERED {
         let pf = kind(name).prefilter();
         for (axis, an) in ["x", "y", "z"].into_iter().enumerate() {
             g.bench_function(format!("{name}/{an}"), |b| {
-                b.iter_custom(|iters| {
-                    let mut total = Duration::ZERO;
-                    for _ in 0..iters {
-                        work.copy_from_slice(&pristine);
-                        let t = Instant::now();
-                        pf.apply_axis_strided(black_box(&mut work), dims, origin, strides, axis);
-                        total += t.elapsed();
-                    }
-                    total
-                })
+                b.iter_custom(|iters| (0..iters).map(|_| passes.time(&pf, axis)).sum())
             });
         }
     }

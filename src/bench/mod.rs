@@ -17,6 +17,7 @@ pub mod machine;
 pub mod pareto;
 pub mod peer;
 pub mod plot;
+pub mod prefilter_pass;
 pub mod report;
 pub mod results;
 mod runner;

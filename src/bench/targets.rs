@@ -28,7 +28,8 @@ use std::time::Instant;
 
 use serde::Serialize;
 
-use crate::filter::{Coeffs, FilterKind, PREFILTERED_NAMES as PREFILTERED};
+use super::prefilter_pass::PrefilterPasses;
+use crate::filter::{FilterKind, PREFILTERED_NAMES as PREFILTERED};
 use crate::phantom::{PhantomFormat, SphereSpec};
 use crate::prepare::{Cache, Prepared};
 use crate::render::{self, RenderStats};
@@ -474,8 +475,8 @@ fn events(s: &RenderStats) -> f64 {
 }
 
 /// Issue 7's prefilter rate: one pass per filter and axis over a padded
-/// `prefilter_size`³ u8 sphere in f64 (input restored untimed before each,
-/// as `benches/filter.rs` does), each round judged by its slowest pass.
+/// `prefilter_size`³ u8 sphere in f64 ([`PrefilterPasses`], as
+/// `benches/filter.rs` times them), each round judged by its slowest pass.
 fn prefilter_row(opts: &TargetOptions) -> Result<TargetRow, BenchError> {
     let n = opts.prefilter_size;
     let vol = SphereSpec {
@@ -490,15 +491,9 @@ fn prefilter_row(opts: &TargetOptions) -> Result<TargetRow, BenchError> {
         what: "prefilter volume".into(),
         msg: e.to_string(),
     })?;
-    let grid = Coeffs::<f64>::from_volume(&vol);
+    let mut passes_of = PrefilterPasses::of(&vol);
     drop(vol);
-    let dims = grid.dims();
-    let origin = grid.interior_offset(0, 0, 0);
-    let strides = [grid.stride(0), grid.stride(1), grid.stride(2)];
-    let pristine = grid.data().to_vec();
-    drop(grid);
-    let mut work = pristine.clone();
-    let voxels = dims.iter().product::<usize>() as f64;
+    let voxels = passes_of.voxels() as f64;
     // Every pass's (rate, filter, axis), and each round's slowest rate.
     let mut passes = Vec::new();
     let mut rounds = Vec::new();
@@ -512,10 +507,7 @@ fn prefilter_row(opts: &TargetOptions) -> Result<TargetRow, BenchError> {
                 })?
                 .prefilter();
             for axis in 0..3 {
-                work.copy_from_slice(&pristine);
-                let t = Instant::now();
-                pf.apply_axis_strided(&mut work, dims, origin, strides, axis);
-                let rate = voxels / t.elapsed().as_secs_f64() / 1e6;
+                let rate = voxels / passes_of.time(&pf, axis).as_secs_f64() / 1e6;
                 slowest = slowest.min(rate);
                 passes.push((rate, name, axis));
             }
