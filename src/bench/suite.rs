@@ -774,20 +774,7 @@ baselines and the dense-march ground truth of the CT scenes"
 
 fn full() -> Suite {
     let mut tables = paper_tables();
-    tables.push(filters_table(
-        &SIDE_512,
-        &[
-            "linear",
-            "catmull-rom",
-            "bspline2",
-            "bspline3",
-            "bspline4",
-            "bspline5",
-            "bspline6",
-            "bspline7",
-            "smooth-bspline3",
-        ],
-    ));
+    tables.push(filters_table(&SIDE_512, &crate::filter::FILTER_NAMES));
     let leaves = [1, 2, 4, 8]
         .iter()
         .map(|l| {

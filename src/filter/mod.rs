@@ -150,6 +150,17 @@ impl fmt::Display for FilterKind {
 mod tests {
     use super::*;
 
+    /// The prefiltered list is exactly the filters (in their order) whose
+    /// prefilter does something, at the λ the benches parse them with.
+    #[test]
+    fn prefiltered_names_are_the_filters_with_a_prefilter() {
+        let prefiltered: Vec<&str> = FILTER_NAMES
+            .into_iter()
+            .filter(|n| !FilterKind::parse(n, 1.0).unwrap().prefilter().is_identity())
+            .collect();
+        assert_eq!(prefiltered, PREFILTERED_NAMES);
+    }
+
     #[test]
     fn parses_spec_names() {
         assert_eq!(FilterKind::parse("linear", 0.0), Ok(FilterKind::Linear));
