@@ -26,7 +26,8 @@ use super::coeffs::Coefficient;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Pole {
     Real(f64),
-    /// A conjugate pair `z, conj(z)` (two sections).
+    /// A conjugate pair `z, conj(z)` (two sections, filtered as one: see
+    /// [`pair_weight`]).
     ConjugatePair(Complex64),
 }
 
@@ -37,7 +38,12 @@ pub struct Prefilter {
 }
 
 /// Number of adjacent lines filtered together (as SIMD-friendly lanes).
-const LANES: usize = 16;
+/// A bundle's row is then 256 contiguous bytes in the y and z passes: 32
+/// gave the fastest passes of 8, 16, 32 and 64 on a 512³ grid (16 left the
+/// y pass at half the others' rate on a Zen 4; BENCHMARKS.md, *The
+/// prefilter's passes*), and a bundle (256 KiB for 512 samples) still fits
+/// in L2.
+const LANES: usize = 32;
 
 impl Prefilter {
     pub fn identity() -> Prefilter {
@@ -148,12 +154,6 @@ impl Prefilter {
         g.re
     }
 
-    fn has_complex(&self) -> bool {
-        self.poles
-            .iter()
-            .any(|p| matches!(p, Pole::ConjugatePair(_)))
-    }
-
     /// Filters one line in place (used by tests and 1-D tools).
     pub fn apply_line(&self, line: &mut [f64]) {
         if self.is_identity() || line.len() < 2 {
@@ -164,34 +164,37 @@ impl Prefilter {
     }
 
     /// Filters a bundle of `lanes` lines stored interleaved (`buf[k*lanes + l]`),
-    /// gain included.
+    /// gain included: the real poles' sections in turn, then each conjugate
+    /// pair (see [`pair_weight`]).
     fn filter_bundle(&self, buf: &mut [f64], n: usize, lanes: usize, scratch: &mut Scratch) {
         let gain = self.gain();
-        if self.has_complex() {
+        for v in buf.iter_mut() {
+            *v *= gain;
+        }
+        for p in &self.poles {
+            if let Pole::Real(z) = *p {
+                filter_lanes(buf, n, lanes, z, &mut scratch.rinit);
+            }
+        }
+        for p in &self.poles {
+            let Pole::ConjugatePair(z) = *p else {
+                continue;
+            };
             let cbuf = &mut scratch.complex;
             cbuf.clear();
-            cbuf.extend(buf.iter().map(|&v| Complex64::new(v * gain, 0.0)));
-            for p in &self.poles {
-                match *p {
-                    Pole::Real(z) => {
-                        filter_lanes(cbuf, n, lanes, Complex64::new(z, 0.0), &mut scratch.cinit)
-                    }
-                    Pole::ConjugatePair(z) => {
-                        filter_lanes(cbuf, n, lanes, z, &mut scratch.cinit);
-                        filter_lanes(cbuf, n, lanes, z.conj(), &mut scratch.cinit);
+            cbuf.extend(buf.iter().map(|&v| Complex64::new(v, 0.0)));
+            filter_lanes(cbuf, n, lanes, z, &mut scratch.cinit);
+            match pair_weight(z) {
+                Some(w) => {
+                    for (o, c) in buf.iter_mut().zip(cbuf.iter()) {
+                        *o = w * c.im;
                     }
                 }
-            }
-            for (o, c) in buf.iter_mut().zip(cbuf.iter()) {
-                *o = c.re;
-            }
-        } else {
-            for v in buf.iter_mut() {
-                *v *= gain;
-            }
-            for p in &self.poles {
-                if let Pole::Real(z) = *p {
-                    filter_lanes(buf, n, lanes, z, &mut scratch.rinit);
+                None => {
+                    filter_lanes(cbuf, n, lanes, z.conj(), &mut scratch.cinit);
+                    for (o, c) in buf.iter_mut().zip(cbuf.iter()) {
+                        *o = c.re;
+                    }
                 }
             }
         }
@@ -269,23 +272,42 @@ impl Prefilter {
                     let base = origin + ib0 * stride_b + ic * stride_c;
                     // SAFETY: bundles cover disjoint sets of lines (distinct
                     // (ib, ic) pairs), so no two tasks touch the same element, and
-                    // every offset is at most `last < data.len()` (checked above).
+                    // every offset is at most `last < data.len()` (checked above);
+                    // a row's slice (lanes adjacent in memory, `stride_b == 1`)
+                    // holds only this bundle's elements and lives for one row.
+                    // The pointer is read once: read through the closure's
+                    // capture it was reloaded for every element. The y and z
+                    // passes' rows are contiguous and copy as vectors
+                    // (BENCHMARKS.md, *The prefilter's passes*).
+                    let p = ptr.get();
                     unsafe {
-                        for k in 0..len {
-                            for l in 0..lanes {
-                                let off = base + k * stride_a + l * stride_b;
-                                *buf.get_unchecked_mut(k * lanes + l) =
-                                    (*ptr.get().add(off)).to_f64();
+                        for (k, row) in buf.chunks_exact_mut(lanes).enumerate() {
+                            let at = p.add(base + k * stride_a);
+                            if stride_b == 1 {
+                                let src = std::slice::from_raw_parts(at, lanes);
+                                for (v, s) in row.iter_mut().zip(src) {
+                                    *v = s.to_f64();
+                                }
+                            } else {
+                                for (l, v) in row.iter_mut().enumerate() {
+                                    *v = (*at.add(l * stride_b)).to_f64();
+                                }
                             }
                         }
                     }
                     self.filter_bundle(buf, len, lanes, scratch);
                     unsafe {
-                        for k in 0..len {
-                            for l in 0..lanes {
-                                let off = base + k * stride_a + l * stride_b;
-                                *ptr.get().add(off) =
-                                    T::from_f64(*buf.get_unchecked(k * lanes + l));
+                        for (k, row) in buf.chunks_exact(lanes).enumerate() {
+                            let at = p.add(base + k * stride_a);
+                            if stride_b == 1 {
+                                let dst = std::slice::from_raw_parts_mut(at, lanes);
+                                for (d, &v) in dst.iter_mut().zip(row) {
+                                    *d = T::from_f64(v);
+                                }
+                            } else {
+                                for (l, &v) in row.iter().enumerate() {
+                                    *at.add(l * stride_b) = T::from_f64(v);
+                                }
                             }
                         }
                     }
@@ -294,6 +316,30 @@ impl Prefilter {
         }
     }
 }
+
+/// The conjugate pair `z, z̄` by partial fractions: the two sections in
+/// cascade, `H_z H_z̄`, equal `B H_z + B̄ H_z̄` with the section
+/// `H_z(q) = -z / ((1 - z/q)(1 - z q))` and `B = |z|² / ((z̄ - z)(1 - |z|²))`,
+/// which is imaginary; on a real line `H_z̄ s` is the conjugate of `H_z s`, so
+/// the pair's output is `2 Re(B H_z s) = w · Im(H_z s)` with
+/// `w = -2 Im(B) = -|z|² / (Im(z) (1 - |z|²))`. One complex section instead
+/// of two halves the pair's arithmetic (the smoothing spline's prefilter
+/// above `λ = 1/144`, the slowest pass of all).
+///
+/// Returns `None` where `|w|` is large — a pair close to the real axis
+/// (`λ` just above 1/144), whose two terms nearly cancel — so the caller
+/// runs the cascade instead: the weight scales the section's rounding, and
+/// past [`MAX_PAIR_WEIGHT`] that would cost more than a few bits.
+fn pair_weight(z: Complex64) -> Option<f64> {
+    let r2 = z.norm_sqr();
+    let w = -r2 / (z.im * (1.0 - r2));
+    (w.is_finite() && w.abs() <= MAX_PAIR_WEIGHT).then_some(w)
+}
+
+/// The largest partial-fraction weight [`pair_weight`] accepts: at most
+/// about five bits of the section's rounding (`λ = 1` has 1.0, `λ = 1000`
+/// 31.6).
+const MAX_PAIR_WEIGHT: f64 = 32.0;
 
 /// Reusable per-thread buffers.
 #[derive(Default)]
@@ -488,6 +534,54 @@ mod tests {
                 }
             }
         }
+    }
+
+    /// A conjugate pair filtered by partial fractions ([`pair_weight`]) gives
+    /// the two sections in cascade to rounding, over the λ where it is used,
+    /// and `λ` just above 1/144 or very large falls back to the cascade.
+    #[test]
+    fn conjugate_pair_by_partial_fractions_matches_the_cascade() {
+        let mut used = 0;
+        for lambda in [0.0070, 0.008, 0.05, 0.3, 1.0, 7.0, 100.0, 900.0, 1e4] {
+            let pf = Prefilter::smoothing_cubic(lambda);
+            let [Pole::ConjugatePair(z)] = pf.poles() else {
+                panic!("λ {lambda}: {:?}", pf.poles());
+            };
+            for len in [2usize, 3, 5, 17, 200] {
+                let s: Vec<f64> = (0..len).map(|i| ((i * 53 + 7) % 31) as f64 * 8.0).collect();
+                let mut got = s.clone();
+                pf.apply_line(&mut got);
+                let mut c: Vec<Complex64> = s
+                    .iter()
+                    .map(|&v| Complex64::new(v * pf.gain(), 0.0))
+                    .collect();
+                let mut init = Vec::new();
+                filter_lanes(&mut c, len, 1, *z, &mut init);
+                filter_lanes(&mut c, len, 1, z.conj(), &mut init);
+                let scale = s.iter().fold(0.0f64, |m, v| m.max(v.abs()));
+                for (i, (g, w)) in got.iter().zip(&c).enumerate() {
+                    assert!(
+                        (g - w.re).abs() <= 1e-13 * scale,
+                        "λ {lambda} len {len} i {i}: {g} vs {}",
+                        w.re
+                    );
+                }
+            }
+            used += usize::from(pair_weight(*z).is_some());
+        }
+        assert_eq!(
+            used, 8,
+            "the pairs of λ 0.007..900 use the partial fractions, 1e4 not"
+        );
+        let near = Prefilter::smoothing_cubic(1.0 / 144.0 * (1.0 + 1e-9));
+        let [Pole::ConjugatePair(z)] = near.poles() else {
+            panic!("{:?}", near.poles());
+        };
+        assert_eq!(
+            pair_weight(*z),
+            None,
+            "a nearly real pair takes the cascade"
+        );
     }
 
     #[test]
