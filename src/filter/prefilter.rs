@@ -327,9 +327,11 @@ impl Prefilter {
 /// above `λ = 1/144`, the slowest pass of all).
 ///
 /// Returns `None` where `|w|` is large — a pair close to the real axis
-/// (`λ` just above 1/144), whose two terms nearly cancel — so the caller
-/// runs the cascade instead: the weight scales the section's rounding, and
-/// past [`MAX_PAIR_WEIGHT`] that would cost more than a few bits.
+/// (`λ` within a relative 7e-6 above 1/144), whose two terms nearly
+/// cancel, or close to the unit circle (`λ` above about 1025) — so the
+/// caller runs the cascade instead: the weight scales the section's
+/// rounding, and past [`MAX_PAIR_WEIGHT`] that would cost more than a few
+/// bits.
 fn pair_weight(z: Complex64) -> Option<f64> {
     let r2 = z.norm_sqr();
     let w = -r2 / (z.im * (1.0 - r2));
