@@ -447,6 +447,17 @@ fn targets_report_every_target() {
         );
     }
     assert_eq!(rows.len(), 9, "{names:?}");
+    // Issue 7's frames are stated for bspline3 on every scene, the CT
+    // scenes included (their scene files use the smoothing spline).
+    let frames: Vec<_> = rows
+        .iter()
+        .filter(|r| r["issue"] == 7 && r["unit"] == "ms")
+        .collect();
+    assert_eq!(frames.len(), 4, "{names:?}");
+    for r in frames {
+        let c = r["configuration"].as_str().unwrap();
+        assert!(c.starts_with("bspline3, "), "{r}");
+    }
     for r in rows {
         let value = r["value"].as_f64().unwrap();
         let rounds: Vec<f64> = r["rounds"]
