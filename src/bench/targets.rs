@@ -67,9 +67,9 @@ const FRAMES: [(&str, &str, f64); 4] = [
 /// The filter of issue 7's frame targets for every scene ("512×512,
 /// bspline3, octree+ACCC, PRSS"), in place of the CT scene files' smoothing
 /// spline, which renders their noise without specks and clears more cells
-/// (its frames are faster: teapot 136 ms against this filter's 150–160 on
-/// the Zen 4 host; BENCHMARKS.md, *The frame targets with the issue's
-/// filter*).
+/// (its frames are faster: on the Zen 4 host the teapot's 144–146 ms
+/// against this filter's 191–193, the cranium's 94–105 against 123–135;
+/// BENCHMARKS.md, *The frame targets with the issue's filter*).
 const FRAME_FILTER: &str = "bspline3";
 
 /// Issue 4's datasets for the octree over step-0.1 ray casting (Table 2's
