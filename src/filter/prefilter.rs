@@ -26,8 +26,8 @@ use super::coeffs::Coefficient;
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub enum Pole {
     Real(f64),
-    /// A conjugate pair `z, conj(z)` (two sections, filtered as one: see
-    /// [`pair_weight`]).
+    /// A conjugate pair `z, conj(z)` (two sections, filtered as one where
+    /// that keeps the rounding small: see [`pair_weight`]).
     ConjugatePair(Complex64),
 }
 
