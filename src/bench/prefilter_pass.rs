@@ -14,50 +14,48 @@ use crate::volume::Volume;
 /// A volume's padded coefficient grid, kept pristine, and a working copy to
 /// filter.
 pub struct PrefilterPasses {
-    dims: [usize; 3],
-    origin: usize,
-    strides: [usize; 3],
-    pristine: Vec<f64>,
+    pristine: Coeffs<f64>,
     work: Vec<f64>,
 }
 
 impl PrefilterPasses {
     /// The padded `f64` grid of `vol`'s samples (before any filtering).
     pub fn of(vol: &Volume) -> PrefilterPasses {
-        let grid = Coeffs::<f64>::from_volume(vol);
-        let dims = grid.dims();
-        let origin = grid.interior_offset(0, 0, 0);
-        let strides = [grid.stride(0), grid.stride(1), grid.stride(2)];
-        let pristine = grid.data().to_vec();
-        drop(grid);
-        let work = pristine.clone();
-        PrefilterPasses {
-            dims,
-            origin,
-            strides,
-            pristine,
-            work,
-        }
+        let pristine = Coeffs::<f64>::from_volume(vol);
+        let work = pristine.data().to_vec();
+        PrefilterPasses { pristine, work }
     }
 
     /// Voxels a pass filters (the interior).
     pub fn voxels(&self) -> usize {
-        self.dims.iter().product()
+        self.pristine.dims().iter().product()
     }
 
     /// Restores the input, untimed, then filters it along `axis` (0 = x, 1
     /// = y, 2 = z) with `pf`; returns the pass's time.
     pub fn time(&mut self, pf: &Prefilter, axis: usize) -> Duration {
-        self.work.copy_from_slice(&self.pristine);
+        self.work.copy_from_slice(self.pristine.data());
+        let (dims, origin, strides) = self.layout();
         let t = Instant::now();
         pf.apply_axis_strided(
             std::hint::black_box(&mut self.work),
-            self.dims,
-            self.origin,
-            self.strides,
+            dims,
+            origin,
+            strides,
             axis,
         );
         t.elapsed()
+    }
+
+    /// The interior's dims, its offset and the grid's strides, as
+    /// [`Prefilter::apply_axis_strided`] takes them.
+    fn layout(&self) -> ([usize; 3], usize, [usize; 3]) {
+        let g = &self.pristine;
+        (
+            g.dims(),
+            g.interior_offset(0, 0, 0),
+            [g.stride(0), g.stride(1), g.stride(2)],
+        )
     }
 }
 
@@ -74,11 +72,12 @@ mod tests {
         let pf = FilterKind::parse("bspline3", 0.0).unwrap().prefilter();
         let mut p = PrefilterPasses::of(&vol);
         assert_eq!(p.voxels(), 7 * 6 * 5);
-        let mut want = p.pristine.clone();
-        pf.apply_axis_strided(&mut want, p.dims, p.origin, p.strides, 1);
+        let mut want = p.pristine.data().to_vec();
+        let (dims, origin, strides) = p.layout();
+        pf.apply_axis_strided(&mut want, dims, origin, strides, 1);
         p.time(&pf, 0);
         p.time(&pf, 1);
         assert_eq!(p.work, want);
-        assert_ne!(p.work, p.pristine, "the pass changed the grid");
+        assert_ne!(p.work, p.pristine.data(), "the pass changed the grid");
     }
 }

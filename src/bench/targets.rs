@@ -498,9 +498,9 @@ fn prefilter_row(opts: &TargetOptions) -> Result<TargetRow, BenchError> {
         what: "prefilter volume".into(),
         msg: e.to_string(),
     })?;
-    let mut passes_of = PrefilterPasses::of(&vol);
+    let mut grid = PrefilterPasses::of(&vol);
     drop(vol);
-    let voxels = passes_of.voxels() as f64;
+    let voxels = grid.voxels() as f64;
     // Every pass's (rate, filter, axis), and each round's slowest rate.
     let mut passes = Vec::new();
     let mut rounds = Vec::new();
@@ -514,7 +514,7 @@ fn prefilter_row(opts: &TargetOptions) -> Result<TargetRow, BenchError> {
                 })?
                 .prefilter();
             for axis in 0..3 {
-                let rate = voxels / passes_of.time(&pf, axis).as_secs_f64() / 1e6;
+                let rate = voxels / grid.time(&pf, axis).as_secs_f64() / 1e6;
                 slowest = slowest.min(rate);
                 passes.push((rate, name, axis));
             }

@@ -41,8 +41,8 @@ pub struct Prefilter {
 /// A bundle's row is then 256 contiguous bytes in the y and z passes: 32
 /// gave the fastest passes of 8, 16, 32 and 64 on a 512³ grid (16 left the
 /// y pass at half the others' rate on a Zen 4; BENCHMARKS.md, *The
-/// prefilter's passes*), and a bundle (256 KiB for 512 samples) still fits
-/// in L2.
+/// prefilter's passes*), and a bundle (128 KiB for 512 samples, twice that
+/// as complex lanes) still fits in L2.
 const LANES: usize = 32;
 
 impl Prefilter {
