@@ -26,6 +26,10 @@ pub const EWA_SIGMA: f64 = 0.288_675_134_594_812_9;
 /// below 6e-7 in one dimension).
 const RADIUS: f64 = 5.0;
 
+/// Most checker lines a thin ellipse's integral crosses before the ellipse is
+/// point-sampled instead (each line costs a normal CDF per quadrature node).
+const MAX_TRANSVERSAL_LINES: i64 = 4096;
+
 /// Most inner checker corners evaluated one bivariate normal CDF each.
 const LATTICE_CORNERS: i64 = 16;
 
@@ -95,10 +99,27 @@ pub fn box_coverage(centre: [f64; 2], j: [[f64; 2]; 2], size: f64) -> f64 {
         .unwrap_or_else(|| parity_white(centre[0] / size, centre[1] / size))
 }
 
+/// Checker squares a footprint may be clipped against, one at a time, before
+/// it is point-sampled instead (see [`checker_coverage`]).
+const MAX_CLIPPED_SQUARES: usize = 16_384;
+
+/// The largest error, as a share of the footprint's area, that the one-half
+/// shortcut of [`checker_coverage`] may make.
+const HALF_TOLERANCE: f64 = 1.0 / 64.0;
+
 /// Fraction of the convex polygon `quad` covered by even checker squares
 /// (`floor(u/s) + floor(v/s)` even), exactly, by clipping against every square
-/// it overlaps. `None` for a degenerate polygon. Footprints covering more than
-/// 4096 squares average to within 1/64 of one half and are reported as 0.5.
+/// it overlaps, a row of squares at a time.
+///
+/// A footprint whose bounding box spans more than 4096 squares is reported
+/// as one half where that is provably within [`HALF_TOLERANCE`]: along any line the white and
+/// black lengths differ by at most one square's side `s`, so the white area
+/// differs from half the area `A` by at most `s·min(W, H)/2` for a polygon of
+/// extent `W × H`. A thin sliver along a diagonal stays in squares of one
+/// colour however long it is, so it is clipped square by square. `None` for
+/// a degenerate polygon, one too far out for its squares to be told apart in
+/// `f64`, or a sliver over more than [`MAX_CLIPPED_SQUARES`] squares: the
+/// caller point-samples those, as it does a footprint of no area.
 pub fn checker_coverage(quad: &[[f64; 2]; 4], size: f64) -> Option<f64> {
     let area = polygon_area(quad);
     if !area.is_finite() || area <= 1e-18 * size * size {
@@ -116,27 +137,54 @@ pub fn checker_coverage(quad: &[[f64; 2]; 4], size: f64) -> Option<f64> {
         v0 = v0.min(p[1]);
         v1 = v1.max(p[1]);
     }
-    let (i0, i1) = ((u0 / size).floor() as i64, (u1 / size).floor() as i64);
-    let (j0, j1) = ((v0 / size).floor() as i64, (v1 / size).floor() as i64);
-    if (i1 - i0 + 1).saturating_mul(j1 - j0 + 1) > 4096 {
+    let squares = ((u1 - u0) / size + 1.0) * ((v1 - v0) / size + 1.0);
+    if squares > 4096.0 && 0.5 * size * (u1 - u0).min(v1 - v0) <= HALF_TOLERANCE * area {
         return Some(0.5);
     }
+    // Square indices as integers: beyond 2^52 squares from the origin
+    // neighbouring squares' edges are no longer distinct `f64` values.
+    const FAR: f64 = 4.5e15;
+    if [u0, u1, v0, v1].iter().any(|&x| (x / size).abs() >= FAR) {
+        return None;
+    }
+    let (j0, j1) = ((v0 / size).floor() as i64, (v1 / size).floor() as i64);
+    if j1 - j0 >= MAX_CLIPPED_SQUARES as i64 {
+        return None;
+    }
     let mut white = 0.0;
+    let mut clipped = 0usize;
+    let mut strip: Vec<[f64; 2]> = Vec::with_capacity(8);
     let mut poly: Vec<[f64; 2]> = Vec::with_capacity(8);
     let mut tmp: Vec<[f64; 2]> = Vec::with_capacity(8);
     for j in j0..=j1 {
-        for i in i0..=i1 {
-            if (i + j).rem_euclid(2) != 0 {
-                continue;
-            }
+        let (b0, b1) = (j as f64 * size, (j + 1) as f64 * size);
+        // The row's piece of the footprint, and the squares it spans.
+        strip.clear();
+        strip.extend_from_slice(quad);
+        for (bound, keep_above) in [(b0, true), (b1, false)] {
+            clip(&strip, &mut tmp, 1, bound, keep_above);
+            std::mem::swap(&mut strip, &mut tmp);
+        }
+        if strip.len() < 3 {
+            continue;
+        }
+        let (lo, hi) = strip
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p[0]), hi.max(p[0]))
+            });
+        let (i0, i1) = ((lo / size).floor() as i64, (hi / size).floor() as i64);
+        clipped += (i1 - i0 + 1) as usize;
+        if clipped > MAX_CLIPPED_SQUARES {
+            return None;
+        }
+        // The first even square of the row, then every other one.
+        for i in ((i0 + (i0 + j).rem_euclid(2))..=i1).step_by(2) {
             poly.clear();
-            poly.extend_from_slice(quad);
+            poly.extend_from_slice(&strip);
             let (a0, a1) = (i as f64 * size, (i + 1) as f64 * size);
-            let (b0, b1) = (j as f64 * size, (j + 1) as f64 * size);
-            for (axis, bound, keep_above) in
-                [(0, a0, true), (0, a1, false), (1, b0, true), (1, b1, false)]
-            {
-                clip(&poly, &mut tmp, axis, bound, keep_above);
+            for (bound, keep_above) in [(a0, true), (a1, false)] {
+                clip(&poly, &mut tmp, 0, bound, keep_above);
                 std::mem::swap(&mut poly, &mut tmp);
                 if poly.is_empty() {
                     break;
@@ -215,6 +263,11 @@ fn square_wave_mean(mu: f64, sd: f64) -> f64 {
         } else {
             -1.0
         };
+    }
+    // Beyond four squares' deviation the mean is below exp(-8π²) ≈ 1e-34
+    // (its Fourier series): zero, without a loop over every square.
+    if sd > 4.0 {
+        return 0.0;
     }
     let (lo, hi) = (mu - RADIUS * sd, mu + RADIUS * sd);
     let (m0, m1) = (lo.floor() as i64, hi.floor() as i64);
@@ -347,6 +400,13 @@ pub fn gaussian_coverage(centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64, size: f
     let svv = s2 * (gv[0] * gv[0] + gv[1] * gv[1]);
     let suv = s2 * (gu[0] * gv[0] + gu[1] * gv[1]);
     let (hu, hv) = (RADIUS * suu.sqrt(), RADIUS * svv.sqrt());
+    // Square indices as integers (as `checker_coverage` bounds them): a
+    // footprint further out, or wider, than `f64` tells squares apart is
+    // point-sampled, as a degenerate one is.
+    const FAR: f64 = 4.5e15;
+    if !(c[0].abs() + hu < FAR && c[1].abs() + hv < FAR) {
+        return parity_white(c[0], c[1]);
+    }
     let (m0, m1) = ((c[0] - hu).floor() as i64, (c[0] + hu).floor() as i64);
     let (k0, k1) = ((c[1] - hv).floor() as i64, (c[1] + hv).floor() as i64);
     let u_edges = m0 != m1;
@@ -385,10 +445,42 @@ pub fn gaussian_coverage(centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64, size: f
         return lattice_coverage(c, (su, sv, r), (m0, m1), (k0, k1));
     }
     if corners > 4096 {
-        // Thousands of squares under a thin ellipse: within a few % of 1/2.
-        return 0.5;
+        // Thousands of squares under a thin ellipse. Given `V`, `U` is normal
+        // with variance `det/svv`, and the square wave's mean under it is at
+        // most `(4/π) Σ_{k odd} exp(-k²π² var/2)/k` (its Fourier series);
+        // likewise with `U` and `V` swapped. Where that is small the white
+        // share is one half; a thin ellipse along a diagonal stays on squares
+        // of one colour, so it is integrated, its lines permitting.
+        let var = det / suu.min(svv);
+        if 0.5 * square_wave_bound(var) <= HALF_TOLERANCE {
+            return 0.5;
+        }
+        if (m1 - m0) + (k1 - k0) > MAX_TRANSVERSAL_LINES {
+            return parity_white(c[0], c[1]);
+        }
     }
     transversal_coverage(c, gu, gv, sigma, (m0, m1), (k0, k1), corners <= 32)
+}
+
+/// An upper bound of `|E[sq(U)]|` for `U` normal with variance `var`, from
+/// the square wave's Fourier series: `(4/π) Σ_{k odd} exp(-k²π² var/2)/k`,
+/// summed while its terms matter (at least once; 1 for `var = 0`).
+fn square_wave_bound(var: f64) -> f64 {
+    use std::f64::consts::PI;
+    if var.is_nan() || var <= 0.0 {
+        return 1.0;
+    }
+    let mut acc = 0.0;
+    let mut k = 1.0f64;
+    loop {
+        let term = (-0.5 * k * k * PI * PI * var).exp() / k;
+        acc += term;
+        if term < 1e-6 || 4.0 / PI * acc >= 1.0 {
+            break;
+        }
+        k += 2.0;
+    }
+    (4.0 / PI * acc).min(1.0)
 }
 
 /// `E[sq(U) sq(V)]` for `(U, V) ~ N(c, Σ)` from the Fourier series of the
@@ -537,15 +629,32 @@ pub fn ewa_texture(t: &Texture, centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64) 
     let a = s2 * (jt[0][0] * jt[0][0] + jt[1][0] * jt[1][0]) + RECON;
     let c = s2 * (jt[0][1] * jt[0][1] + jt[1][1] * jt[1][1]) + RECON;
     let b = s2 * (jt[0][0] * jt[0][1] + jt[1][0] * jt[1][1]);
-    let det = a * c - b * b;
-    // Inverse covariance.
-    let (ia, ib, ic) = (c / det, -b / det, a / det);
+    // `ac - b²` by Lagrange's identity, a sum of non-negative terms: the
+    // difference cancels to nothing, or below zero, for a long footprint of
+    // nearly one direction (a Jacobian column zeroed for want of a neighbour).
+    let det_jt = jt[0][0] * jt[1][1] - jt[1][0] * jt[0][1];
+    let det = s2 * s2 * det_jt * det_jt + RECON * (a + c - 2.0 * RECON) + RECON * RECON;
     const R: f64 = 3.0;
     let (hx, hy) = (R * a.sqrt(), R * c.sqrt());
+    // Texel indices as integers: an ellipse too far out or too long for them
+    // (rays grazing the backdrop) is point-sampled.
+    const FAR: f64 = 1e15;
+    if !(det.is_finite() && cx.abs() + hx < FAR && cy.abs() + hy < FAR) {
+        return t.sample(centre[0], centre[1]);
+    }
+    // The inverse covariance's quadratic form, `(c dx² - 2b dx dy + a dy²)/det`,
+    // completed to the square `(a dy - b dx)²/(a det) + dx²/a`: a sum of
+    // non-negative terms, where the form as written cancels below zero
+    // (and `exp` overflows) for a long, thin ellipse.
+    let (inv_a, inv_a_det) = (1.0 / a, 1.0 / (a * det));
     let (x0, x1) = ((cx - hx).ceil() as i64, (cx + hx).floor() as i64);
     let (y0, y1) = ((cy - hy).ceil() as i64, (cy + hy).floor() as i64);
-    let count = ((x1 - x0 + 1).max(1) as f64) * ((y1 - y0 + 1).max(1) as f64);
-    let stride = (count / 4096.0).sqrt().ceil().max(1.0) as i64;
+    // At most about 4096 texels visited: a stride per axis, so that a long
+    // thin ellipse along an axis is thinned along its length, not across.
+    let (nx, ny) = ((x1 - x0 + 1).max(1) as u64, (y1 - y0 + 1).max(1) as u64);
+    let stride_y = ny.div_ceil(64);
+    let per_row = (4096 / ny.div_ceil(stride_y)).max(1);
+    let (stride_x, stride_y) = (nx.div_ceil(per_row) as i64, stride_y as i64);
     let mut acc = [0.0f64; 3];
     let mut wsum = 0.0;
     let mut yi = y0;
@@ -554,7 +663,8 @@ pub fn ewa_texture(t: &Texture, centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64) 
         let mut xi = x0;
         while xi <= x1 {
             let dx = xi as f64 - cx;
-            let q = ia * dx * dx + 2.0 * ib * dx * dy + ic * dy * dy;
+            let across = a * dy - b * dx;
+            let q = across * across * inv_a_det + dx * dx * inv_a;
             if q <= R * R {
                 let w = (-0.5 * q).exp();
                 let texel = if xi >= 0
@@ -571,9 +681,9 @@ pub fn ewa_texture(t: &Texture, centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64) 
                 }
                 wsum += w;
             }
-            xi += stride;
+            xi += stride_x;
         }
-        yi += stride;
+        yi += stride_y;
     }
     if wsum <= 0.0 {
         return t.sample(centre[0], centre[1]);
@@ -723,19 +833,24 @@ mod tests {
         }
     }
 
-    #[test]
-    fn ewa_texture_averages_with_gaussian_weights() {
+    /// A 16×8 photograph 16 units wide, red ramping along x.
+    fn ramp_texture(outside: f32) -> Texture {
         let (w, h) = (16, 8);
-        // A ramp in x: symmetric weights around a texel centre return it.
-        let tex = Texture {
+        Texture {
             width_px: w,
             height_px: h,
             pixels: (0..w * h)
                 .map(|i| [(i % w) as f32 / 16.0, 0.5, 1.0])
                 .collect(),
             world_width: 16.0,
-            outside: [0.0; 3],
-        };
+            outside: [outside; 3],
+        }
+    }
+
+    #[test]
+    fn ewa_texture_averages_with_gaussian_weights() {
+        // A ramp in x: symmetric weights around a texel centre return it.
+        let tex = ramp_texture(0.0);
         // Texel (6, 3) has its centre at u = 6.5 - 8, v = 4 - 3.5.
         let c = ewa_texture(&tex, [-1.5, 0.5], [[1.0, 0.0], [0.0, 1.0]], 1.0);
         assert!(
@@ -765,5 +880,72 @@ mod tests {
         let r = [[1.0, 0.5], [1.5, 1.0], [1.0, 1.5], [0.5, 1.0]];
         assert!((checker_coverage(&r, 1.0).unwrap() - 0.5).abs() < 1e-12);
         assert!(checker_coverage(&[[0.0, 0.0]; 4], 1.0).is_none());
+    }
+
+    #[test]
+    fn long_and_far_footprints_are_exact_or_bounded_and_finish() {
+        // The sliver of the test above, 64 squares long: its bounding box
+        // spans 4225 squares, but it stays on the white diagonal.
+        let d = [[0.2, 0.2], [0.25, 0.2], [64.25, 64.2], [64.2, 64.2]];
+        let expect = 1.0 - 64.0 * 0.00125 / (64.0 * 0.05);
+        assert!((checker_coverage(&d, 1.0).unwrap() - expect).abs() < 1e-9);
+        // Wide both ways: one half, within the tolerance the bound promises.
+        let w = [[0.3, 0.1], [100.3, 0.1], [100.3, 80.1], [0.3, 80.1]];
+        assert_eq!(checker_coverage(&w, 1.0), Some(0.5));
+        // A sliver too long to clip, and footprints reaching 1e19 squares
+        // (rays grazing the backdrop): an answer, not an endless loop.
+        let long = [
+            [0.2, 0.2],
+            [0.25, 0.2],
+            [1e5 + 0.25, 1e5 + 0.2],
+            [1e5 + 0.2, 1e5 + 0.2],
+        ];
+        assert_eq!(checker_coverage(&long, 1.0), None);
+        let far = [[0.0, 0.0], [1e19, 0.0], [1e19, 1.0], [0.0, 1.0]];
+        assert_eq!(checker_coverage(&far, 1.0), Some(0.5));
+        let out = [
+            [1e17, 0.0],
+            [1e17 + 64.0, 0.0],
+            [1e17 + 64.0, 1.0],
+            [1e17, 1.0],
+        ];
+        assert_eq!(checker_coverage(&out, 1.0), None);
+        assert!((0.0..=1.0).contains(&box_coverage([0.5, 0.5], [[1e19, 0.0], [0.0, 1e-30]], 1.0)));
+
+        let s = EWA_SIGMA;
+        // A thin ellipse along the diagonal over hundreds of squares: it
+        // stays on white squares, as the brute-force integral shows.
+        let (c, j) = ([0.5, 0.5], [[300.0, 300.0], [0.001, -0.001]]);
+        let (got, want) = (gaussian_coverage(c, j, s, 1.0), brute(c, j, s, 1.0));
+        assert!(want > 0.9 && (got - want).abs() < 0.01, "{got} vs {want}");
+        // Wide across both families: one half.
+        let got = gaussian_coverage([0.5, 0.5], [[300.0, 0.0], [0.0, 300.0]], s, 1.0);
+        assert!((got - 0.5).abs() < 1e-6, "{got}");
+        for j in [
+            [[1e19, 0.0], [0.0, 0.0]],
+            [[1e19, 1e19], [1e-3, -1e-3]],
+            [[1e12, 0.0], [0.0, 1e-9]],
+            [[f64::MAX, 0.0], [0.0, f64::MAX]],
+        ] {
+            let got = gaussian_coverage([0.5, 0.5], j, s, 1.0);
+            assert!((0.0..=1.0).contains(&got), "{j:?}: {got}");
+        }
+    }
+
+    #[test]
+    fn ewa_texture_stays_finite_for_degenerate_and_huge_footprints() {
+        let tex = ramp_texture(0.25);
+        // One column zeroed (a missing neighbour): `ac - b²` computed as a
+        // difference cancelled to zero or below for such Jacobians.
+        for j in [
+            [[7.19e8, 6.02e8], [0.0, 0.0]],
+            [[3.3e9, -1.7e9], [0.0, 0.0]],
+            [[1e19, 0.0], [0.0, 0.0]],
+            [[1e6, 1e6], [1e-6, -1e-6]],
+            [[f64::MAX, 0.0], [0.0, f64::MAX]],
+        ] {
+            let c = ewa_texture(&tex, [0.5, 0.5], j, EWA_SIGMA);
+            assert!(c.iter().all(|v| v.is_finite()), "{j:?}: {c:?}");
+        }
     }
 }

@@ -145,7 +145,9 @@ pub fn merge(parts: &[Part], memory_limit: u64) -> Result<Merged, MergeError> {
     }
     let [width, height] = first.at.full;
     let n = width as u64 * height as u64;
-    let bytes = n * (4 * names.len() as u64 + 4);
+    // Saturating: a crafted part's display window and channel count can
+    // overflow the product, which must then read as too large.
+    let bytes = n.saturating_mul(4 * names.len() as u64 + 4);
     if bytes > memory_limit {
         return Err(MergeError::TooLarge {
             width,

@@ -16,6 +16,10 @@
 //! - **Footprint** (see [`super::footprint`]): the Jacobian of `M` from
 //!   central differences maps the pixel's filter onto the backdrop, a
 //!   parallelogram (box) or an ellipse (Gaussian, EWA), integrated there.
+//!   A side without a consistent neighbour takes the one-sided difference;
+//!   an axis with neither side consistent has a zero column (the footprint
+//!   collapses to a point sample along it, counted as a nearest quadrant),
+//!   whatever the fallback below says of the other modes.
 //!
 //! Interpolating across a discontinuity of `M` would smear unrelated backdrop
 //! regions together, so a neighbour counts only if it reaches the backdrop and
