@@ -247,73 +247,71 @@ impl Prefilter {
         }
         let last = origin + (0..3).map(|a| (dims[a] - 1) * strides[a]).sum::<usize>();
         assert!(last < data.len(), "prefilter block exceeds the grid");
-        {
-            if dims[axis] < 2 {
-                return;
-            }
-            let (b, c) = match axis {
-                0 => (1, 2),
-                1 => (0, 2),
-                _ => (0, 1),
-            };
-            let bundles_b = dims[b].div_ceil(LANES);
-            let count = bundles_b * dims[c];
-            let (stride_a, stride_b, stride_c) = (strides[axis], strides[b], strides[c]);
-            let len = dims[axis];
-            let ptr = SyncPtr(data.as_mut_ptr());
-            (0..count).into_par_iter().for_each_init(
-                || (Vec::<f64>::new(), Scratch::default()),
-                |(buf, scratch), bundle| {
-                    let ic = bundle / bundles_b;
-                    let ib0 = (bundle % bundles_b) * LANES;
-                    let lanes = LANES.min(dims[b] - ib0);
-                    buf.clear();
-                    buf.resize(len * lanes, 0.0);
-                    let base = origin + ib0 * stride_b + ic * stride_c;
-                    // SAFETY: bundles cover disjoint sets of lines (distinct
-                    // (ib, ic) pairs), so no two tasks touch the same element, and
-                    // every offset is at most `last < data.len()` (checked above);
-                    // a row's slice (lanes adjacent in memory, `stride_b == 1`)
-                    // holds only this bundle's elements and lives for one row.
-                    // The pointer is read once: read through the closure's
-                    // capture it was reloaded for every element. The y and z
-                    // passes' rows are contiguous and copy as vectors
-                    // (BENCHMARKS.md, *The prefilter's passes*).
-                    let p = ptr.get();
-                    unsafe {
-                        for (k, row) in buf.chunks_exact_mut(lanes).enumerate() {
-                            let at = p.add(base + k * stride_a);
-                            if stride_b == 1 {
-                                let src = std::slice::from_raw_parts(at, lanes);
-                                for (v, s) in row.iter_mut().zip(src) {
-                                    *v = s.to_f64();
-                                }
-                            } else {
-                                for (l, v) in row.iter_mut().enumerate() {
-                                    *v = (*at.add(l * stride_b)).to_f64();
-                                }
-                            }
-                        }
-                    }
-                    self.filter_bundle(buf, len, lanes, scratch);
-                    unsafe {
-                        for (k, row) in buf.chunks_exact(lanes).enumerate() {
-                            let at = p.add(base + k * stride_a);
-                            if stride_b == 1 {
-                                let dst = std::slice::from_raw_parts_mut(at, lanes);
-                                for (d, &v) in dst.iter_mut().zip(row) {
-                                    *d = T::from_f64(v);
-                                }
-                            } else {
-                                for (l, &v) in row.iter().enumerate() {
-                                    *at.add(l * stride_b) = T::from_f64(v);
-                                }
-                            }
-                        }
-                    }
-                },
-            );
+        if dims[axis] < 2 {
+            return;
         }
+        let (b, c) = match axis {
+            0 => (1, 2),
+            1 => (0, 2),
+            _ => (0, 1),
+        };
+        let bundles_b = dims[b].div_ceil(LANES);
+        let count = bundles_b * dims[c];
+        let (stride_a, stride_b, stride_c) = (strides[axis], strides[b], strides[c]);
+        let len = dims[axis];
+        let ptr = SyncPtr(data.as_mut_ptr());
+        (0..count).into_par_iter().for_each_init(
+            || (Vec::<f64>::new(), Scratch::default()),
+            |(buf, scratch), bundle| {
+                let ic = bundle / bundles_b;
+                let ib0 = (bundle % bundles_b) * LANES;
+                let lanes = LANES.min(dims[b] - ib0);
+                buf.clear();
+                buf.resize(len * lanes, 0.0);
+                let base = origin + ib0 * stride_b + ic * stride_c;
+                // SAFETY: bundles cover disjoint sets of lines (distinct
+                // (ib, ic) pairs), so no two tasks touch the same element, and
+                // every offset is at most `last < data.len()` (checked above);
+                // a row's slice (lanes adjacent in memory, `stride_b == 1`)
+                // holds only this bundle's elements and lives for one row.
+                // The pointer is read once: read through the closure's
+                // capture it was reloaded for every element. The y and z
+                // passes' rows are contiguous and copy as vectors
+                // (BENCHMARKS.md, *The prefilter's passes*).
+                let p = ptr.get();
+                unsafe {
+                    for (k, row) in buf.chunks_exact_mut(lanes).enumerate() {
+                        let at = p.add(base + k * stride_a);
+                        if stride_b == 1 {
+                            let src = std::slice::from_raw_parts(at, lanes);
+                            for (v, s) in row.iter_mut().zip(src) {
+                                *v = s.to_f64();
+                            }
+                        } else {
+                            for (l, v) in row.iter_mut().enumerate() {
+                                *v = (*at.add(l * stride_b)).to_f64();
+                            }
+                        }
+                    }
+                }
+                self.filter_bundle(buf, len, lanes, scratch);
+                unsafe {
+                    for (k, row) in buf.chunks_exact(lanes).enumerate() {
+                        let at = p.add(base + k * stride_a);
+                        if stride_b == 1 {
+                            let dst = std::slice::from_raw_parts_mut(at, lanes);
+                            for (d, &v) in dst.iter_mut().zip(row) {
+                                *d = T::from_f64(v);
+                            }
+                        } else {
+                            for (l, &v) in row.iter().enumerate() {
+                                *at.add(l * stride_b) = T::from_f64(v);
+                            }
+                        }
+                    }
+                }
+            },
+        );
     }
 }
 
