@@ -30,6 +30,26 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> io::Result<()> {
+    // Through a symbolic link to the file it names, as other tools write,
+    // rather than replacing the link; never over a device, FIFO or socket,
+    // which the rename would replace by a plain file.
+    let linked;
+    let path = match fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => match fs::canonicalize(path) {
+            Ok(target) => {
+                linked = target;
+                linked.as_path()
+            }
+            Err(_) => path, // a dangling link: replaced by the file
+        },
+        _ => path,
+    };
+    if fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "not a regular file (a device, FIFO or socket)",
+        ));
+    }
     let tmp = temp_path(path)?;
     let file = fs::OpenOptions::new()
         .write(true)

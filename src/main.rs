@@ -10,6 +10,16 @@ use std::process::ExitCode;
 use clap::Parser;
 
 fn main() -> ExitCode {
+    // A closed pipe downstream (`snell info v.nrrd | head -1`) ends the
+    // process quietly, as it does other command-line tools, instead of
+    // `println!` panicking on the failed write. Outputs are written
+    // atomically, so none is left half-written.
+    #[cfg(unix)]
+    // SAFETY: restoring a signal's default disposition at start-up, before
+    // any other thread exists.
+    unsafe {
+        libc::signal(libc::SIGPIPE, libc::SIG_DFL);
+    }
     let args = cli::Cli::parse();
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,

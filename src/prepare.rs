@@ -416,6 +416,12 @@ impl Cache {
 
     /// Also persist fields and tags under `dir` (created if missing).
     pub fn with_dir(dir: &Path) -> std::io::Result<Cache> {
+        if dir.exists() && !dir.is_dir() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "exists and is not a directory",
+            ));
+        }
         std::fs::create_dir_all(dir)?;
         Ok(Cache {
             dir: Some(dir.to_path_buf()),
@@ -622,8 +628,40 @@ impl Cache {
     }
 }
 
-const FIELD_MAGIC: &[u8; 8] = b"SNLCOEF1";
-const TAGS_MAGIC: &[u8; 8] = b"SNLTAGS1";
+// Version 2 ends each file with a checksum of its values (version 1 files
+// are ignored and rewritten).
+const FIELD_MAGIC: &[u8; 8] = b"SNLCOEF2";
+const TAGS_MAGIC: &[u8; 8] = b"SNLTAGS2";
+
+/// A running checksum of a cache file's 64-bit values: a damaged file of
+/// the right length (a flipped bit, a block of zeros) would otherwise be
+/// read as good and render a wrong surface.
+#[derive(Clone, Copy)]
+struct Checksum(u64);
+
+impl Checksum {
+    fn new() -> Checksum {
+        Checksum(0x243f_6a88_85a3_08d3)
+    }
+
+    fn add(&mut self, w: u64) {
+        self.0 = (self.0 ^ w)
+            .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            .rotate_left(29);
+    }
+
+    fn value(self) -> u64 {
+        crate::phantom::mix64(self.0)
+    }
+}
+
+/// Reads the checksum that ends a file and compares it with `sum`.
+fn check_sum(r: &mut impl Read, sum: Checksum) -> std::io::Result<()> {
+    if read_u64(r)? != sum.value() {
+        return Err(bad("checksum mismatch (damaged file)"));
+    }
+    Ok(())
+}
 
 fn write_u64s(w: &mut dyn Write, v: &[u64]) -> std::io::Result<()> {
     for x in v {
@@ -657,10 +695,13 @@ fn write_field<T: Coefficient>(w: &mut dyn Write, f: &Field<T>) -> std::io::Resu
     let d = f.dims();
     write_u64s(w, &[d[0] as u64, d[1] as u64, d[2] as u64])?;
     write_u64s(w, &[f.coeffs().interior().len() as u64])?;
+    let mut sum = Checksum::new();
     for v in f.coeffs().interior() {
-        w.write_all(&v.to_f64().to_le_bytes())?;
+        let bits = v.to_f64().to_bits();
+        sum.add(bits);
+        w.write_all(&bits.to_le_bytes())?;
     }
-    Ok(())
+    write_u64s(w, &[sum.value()])
 }
 
 fn read_exact_vec(r: &mut impl Read, n: usize) -> std::io::Result<Vec<u8>> {
@@ -705,11 +746,15 @@ fn read_field<T: Coefficient>(
         return Err(bad("length mismatch"));
     }
     let mut vals = Vec::with_capacity(n as usize);
+    let mut sum = Checksum::new();
     let mut b = [0u8; 8];
     for _ in 0..n {
         r.read_exact(&mut b)?;
-        vals.push(f64::from_le_bytes(b));
+        let bits = u64::from_le_bytes(b);
+        sum.add(bits);
+        vals.push(f64::from_bits(bits));
     }
+    check_sum(&mut r, sum)?;
     if r.read(&mut b)? != 0 {
         return Err(bad("trailing data"));
     }
@@ -726,7 +771,10 @@ fn write_tags(w: &mut dyn Write, t: &Tags) -> std::io::Result<()> {
     w.write_all(TAGS_MAGIC)?;
     write_u64s(w, &t.cells.map(|c| c as u64))?;
     write_u64s(w, &[t.words().len() as u64])?;
-    write_u64s(w, t.words())
+    write_u64s(w, t.words())?;
+    let mut sum = Checksum::new();
+    t.words().iter().for_each(|&x| sum.add(x));
+    write_u64s(w, &[sum.value()])
 }
 
 fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<Tags> {
@@ -745,6 +793,9 @@ fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<Tags> {
     let words = (0..n)
         .map(|_| read_u64(&mut r))
         .collect::<std::io::Result<Vec<u64>>>()?;
+    let mut sum = Checksum::new();
+    words.iter().for_each(|&x| sum.add(x));
+    check_sum(&mut r, sum)?;
     let mut b = [0u8; 1];
     if r.read(&mut b)? != 0 {
         return Err(bad("trailing data"));
@@ -841,20 +892,39 @@ mod tests {
             first.accel.as_ref().unwrap().octree.tags(),
             second.accel.as_ref().unwrap().octree.tags()
         );
-        // Damage every file: the cache warns, rebuilds, and gets the same answer.
-        for f in &files {
-            let mut b = std::fs::read(f).unwrap();
-            let n = b.len();
-            b.truncate(n - 3);
-            std::fs::write(f, b).unwrap();
+        // Damage every file, cut short or one bit flipped in its values (the
+        // length unchanged): the cache warns, rebuilds, and gets the same
+        // answer.
+        for flip in [false, true] {
+            for f in &files {
+                let mut b = std::fs::read(f).unwrap();
+                let n = b.len();
+                if flip {
+                    b[n - 20] ^= 0x10;
+                } else {
+                    b.truncate(n - 3);
+                }
+                std::fs::write(f, b).unwrap();
+            }
+            let mut broken = Cache::with_dir(&dir).unwrap();
+            let third = broken.prepare(&s, &LoadOptions::default()).unwrap();
+            assert_eq!(broken.warnings.len(), 2, "{:?}", broken.warnings);
+            if flip {
+                assert!(
+                    broken.warnings.iter().all(|w| w.contains("checksum")),
+                    "{:?}",
+                    broken.warnings
+                );
+            }
+            assert_eq!(
+                first.field.as_f64().unwrap().coeffs().interior(),
+                third.field.as_f64().unwrap().coeffs().interior()
+            );
+            assert_eq!(
+                first.accel.as_ref().unwrap().octree.tags(),
+                third.accel.as_ref().unwrap().octree.tags()
+            );
         }
-        let mut broken = Cache::with_dir(&dir).unwrap();
-        let third = broken.prepare(&s, &LoadOptions::default()).unwrap();
-        assert_eq!(broken.warnings.len(), 2, "{:?}", broken.warnings);
-        assert_eq!(
-            first.field.as_f64().unwrap().coeffs().interior(),
-            third.field.as_f64().unwrap().coeffs().interior()
-        );
         std::fs::remove_dir_all(&dir).unwrap();
     }
 

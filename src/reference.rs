@@ -26,6 +26,8 @@ pub enum ReferenceError {
     Anisotropic([f64; 3]),
     #[error("iso-value {iso} is not inside (0, {full}) of the phantom's range: no surface")]
     NoSurface { iso: f64, full: f64 },
+    #[error(transparent)]
+    Phantom(#[from] crate::phantom::PhantomError),
 }
 
 /// One spherical interface: crossing it toggles membership of its ball.
@@ -53,6 +55,8 @@ impl Reference {
         let VolumeSource::Phantom(PhantomSpec::Sphere(spec)) = &scene.volume else {
             return Err(ReferenceError::NotASphere);
         };
+        // The phantom `render` would refuse to build is refused here too.
+        spec.validate()?;
         let sp = scene.spacing.unwrap_or([1.0; 3]);
         if sp[0] != sp[1] || sp[1] != sp[2] {
             return Err(ReferenceError::Anisotropic(sp));

@@ -538,6 +538,19 @@ fn bad_inputs_fail_cleanly_without_output() {
         )
     });
     scene_file(&t, "ior.toml", |s| s.replace("ior = 1.5", "ior = 0.0"));
+    scene_file(&t, "ok.toml", |s| s.to_string());
+    // Two parts of one frame, for comparisons of different regions.
+    for (name, region) in [("k0", "0,0,64,4"), ("k1", "0,4,64,8")] {
+        let o = bin()
+            .args(["render", "ok.toml", "-q", "--region", region, "-o"])
+            .arg(format!("{name}.png"))
+            .arg("--hits")
+            .arg(format!("{name}.exr"))
+            .current_dir(&t.0)
+            .output()
+            .unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
     scene_file(&t, "section.toml", |s| {
         s.replace("[volume.phantom]", "[volume.phantomx]")
     });
@@ -591,12 +604,23 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("file", "merge: a part that is not an EXR", "merge empty.nrrd -o out.exr", &["empty.nrrd", "OpenEXR"]),
         bad("flag", "--threads 0", "render {sphere} -o out.png --threads 0", &["--threads"]),
         bad("flag", "--threads not a number", "render {sphere} -o out.png --threads two", &["--threads", "two"]),
+        bad("flag", "--threads beyond 1024", "render {sphere} -o out.png --threads 100000", &["--threads", "1024"]),
+        bad("flag", "-o not named .png", "render {sphere} -o out.jpg", &["out.jpg", ".png"]),
+        bad("flag", "--hits and --exr one file", "render {sphere} -o out.png --hits h.exr --exr h.exr", &["h.exr", "same file"]),
+        bad("flag", "--stats over the scene file", "render ok.toml -o out.png --stats ok.toml", &["ok.toml", "input"]),
+        bad("flag", "-o a device", "render {sphere} -o /dev/null", &["/dev/null", "regular file"]),
+        bad("flag", "--memory-limit not a size (render)", "render {sphere} -o out.png --memory-limit lots", &["--memory-limit", "lots"]),
+        bad("flag", "--cache is a file", "render {sphere} -o out.png --cache good.txt", &["good.txt", "not a directory"]),
+        bad("flag", "merge -o not named .exr", "merge k0.exr k1.exr -o out.png", &["out.png", ".exr"]),
+        bad("flag", "merge -o over a part", "merge k0.exr k1.exr -o k1.exr", &["k1.exr", "input"]),
         bad("flag", "--set without =", "render {sphere} -o out.png --set nonsense", &["--set nonsense"]),
         bad("flag", "-o into a missing directory", "render {sphere} -o /nonexistent-dir/x.png", &["/nonexistent-dir"]),
         bad("flag", "-o is a directory", "render {sphere} -o .", &["is a directory"]),
         bad("flag", "--hits into a missing directory", "render {sphere} -o out.png --hits /nonexistent-dir/h.exr", &["/nonexistent-dir"]),
         bad("flag", "sample --filter unknown", "sample {tooth} --filter gauss --points good.txt", &["gauss"]),
         bad("flag", "sample --lambda negative", "sample {tooth} --filter smooth-bspline3 --lambda -1 --points good.txt", &["lambda"]),
+        bad("flag", "sample --lambda above 1e12", "sample {tooth} --filter smooth-bspline3 --lambda 1e20 --points good.txt", &["lambda", "1e12"]),
+        bad("file", "raw: a directory", "info . --dims 2,2,2 --type u8", &["is a directory"]),
         bad("file", "sample points: a row of two numbers", "sample {tooth} --filter bspline3 --points fields.txt", &["fields.txt", "line 2"]),
         bad("file", "sample points: NaN", "sample {tooth} --filter bspline3 --points nanpts.txt", &["nanpts.txt", "line 3"]),
         bad("file", "sample points file missing", "sample {tooth} --filter linear --points nopoints.txt", &["nopoints.txt"]),
@@ -610,9 +634,14 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "phantom --size 0", "phantom sphere --size 0 -o p.nrrd", &["size"]),
         bad("flag", "phantom --format unknown", "phantom sphere --format u3 -o p.nrrd", &["--format", "u3"]),
         bad("flag", "phantom --hole with two numbers", "phantom sphere --hole 1,2 -o p.nrrd", &["--hole"]),
+        bad("flag", "phantom --noise beyond f32", "phantom sphere --size 8 --noise 1e39 --format f32 -o p.nrrd", &["phantom", "f32"]),
+        bad("flag", "phantom Marschner-Lobb alpha -1", "phantom marschner-lobb --size 8 --alpha=-1 -o p.nrrd", &["phantom", "inf"]),
         bad("flag", "unknown subcommand", "frobnicate", &["frobnicate"]),
         bad("file", "compare: not an EXR", "compare notexr.exr notexr.exr", &["notexr.exr"]),
         bad("file", "compare: EXR missing", "compare nothere.exr notexr.exr", &["nothere.exr"]),
+        bad("file", "compare: hits against a missing file", "compare k0.exr nothere.exr", &["nothere.exr", "k0.exr"]),
+        bad("file", "compare: hits of two regions", "compare k0.exr k1.exr", &["k0.exr", "k1.exr", "different regions"]),
+        bad("flag", "compare --diff of hits", "compare k0.exr k0.exr --diff d.png", &["--diff"]),
         bad("scene", "required key missing", "render nokey.toml -o out.png", &["nokey.toml", "iso"]),
         bad("scene", "unknown filter", "render filter.toml -o out.png", &["filter.toml", "surface.filter", "gaussian"]),
         bad("scene", "camera look_at at its own position", "render samepos.toml -o out.png", &["samepos.toml", "camera"]),
@@ -637,6 +666,7 @@ fn bad_inputs_fail_cleanly_without_output() {
             ..bad("scene", "image over SNELL_MEMORY_LIMIT=1M", "render {sphere} -o out.png --hits h.exr", &["[image]", "limit of 1.0 MiB"])
         },
         bad("scene", "reference of a scene without a sphere phantom", "reference {lobster} --hits h.exr -o ref.png", &["sphere phantom"]),
+        bad("scene", "reference of a phantom of negative radius", "reference {sphere} --hits h.exr --set volume.phantom.radius=-5", &["radius", "-5"]),
     ];
 
     let before = listing(&t.0);
@@ -688,6 +718,38 @@ fn bad_inputs_fail_cleanly_without_output() {
     if let Some(dir) = std::env::var_os("SNELL_TABLE_DIR") {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(Path::new(&dir).join("bad-inputs.md"), &table).unwrap();
+    }
+}
+
+/// Volumes with an axis of one or two samples (no cells, or one layer of
+/// them) render with every traversal: a backdrop, not a panic.
+#[test]
+fn thin_volumes_render_with_every_traversal() {
+    let t = Tmp::new("thin");
+    for size in [1, 2] {
+        for traversal in ["step", "dda", "octree", "distance"] {
+            let o = bin()
+                .args([
+                    "render",
+                    root().join(SPHERE).to_str().unwrap(),
+                    "-q",
+                    "-o",
+                    "out.png",
+                ])
+                .args(["--set", "image.width=16", "--set", "image.height=16"])
+                .arg("--set")
+                .arg(format!("volume.phantom.size={size}"))
+                .arg("--set")
+                .arg(format!("render.traversal={traversal}"))
+                .current_dir(&t.0)
+                .output()
+                .unwrap();
+            assert!(
+                o.status.success(),
+                "size {size}, {traversal}: {}",
+                stderr(&o)
+            );
+        }
     }
 }
 

@@ -42,7 +42,7 @@ pub const DEFAULT_REPEATS: usize = 3;
 
 #[derive(Debug, thiserror::Error)]
 pub enum BenchError {
-    #[error("unknown suite '{0}' (expected one of: quick, paper, full)")]
+    #[error("unknown suite '{0}' (expected one of: quick, paper, full, scaling)")]
     UnknownSuite(String),
     #[error("unknown peer '{0}' (expected: povray)")]
     UnknownPeer(String),

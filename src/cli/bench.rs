@@ -37,8 +37,8 @@ pub struct Args {
     #[arg(long, value_name = "BENCHMARKS.md")]
     pub update: Option<PathBuf>,
     /// Worker threads (default: all cores; 2 for each renderer with --peer,
-    /// and 2 with --targets, whose verdicts need 2).
-    #[arg(long)]
+    /// and 2 with --targets, whose verdicts need 2); 1 to 1024.
+    #[arg(long, value_parser = super::common::thread_count)]
     pub threads: Option<usize>,
     /// Directory of the scene files.
     #[arg(long, default_value = "scenes")]

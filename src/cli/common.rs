@@ -108,6 +108,24 @@ impl VolumeArgs {
     }
 }
 
+/// Most worker threads a command starts: far above any core count snell
+/// could use, and low enough that a typo is refused at once instead of
+/// spawning threads until the system refuses.
+pub const MAX_THREADS: usize = 1024;
+
+/// `--threads`: a count from 1 to [`MAX_THREADS`].
+pub fn thread_count(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a thread count"))?;
+    if (1..=MAX_THREADS).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!("must be from 1 to {MAX_THREADS}, got {n}"))
+    }
+}
+
 /// Refuses to write into a directory that does not exist, before any work.
 pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
     let dir = match path.parent() {
@@ -124,7 +142,78 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
     if path.is_dir() {
         bail!("{}: is a directory", path.display());
     }
+    // Outputs are written beside the target and renamed over it, which
+    // would replace a device or FIFO by a plain file.
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        bail!(
+            "{}: is not a regular file (a device, FIFO or socket); outputs go to files",
+            path.display()
+        );
+    }
     Ok(path.to_path_buf())
+}
+
+/// Refuses an output whose name does not end in one of `formats`: the file is
+/// written in that format whatever it is called, and `-o out.jpg` holding PNG
+/// data would mislead every program that opens it.
+pub fn check_format(path: &Path, flag: &str, formats: &[&str]) -> anyhow::Result<()> {
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    if ext.as_deref().is_some_and(|e| formats.contains(&e)) {
+        return Ok(());
+    }
+    bail!(
+        "{flag} {}: writes {}; give the file a .{} name",
+        path.display(),
+        formats[0].to_ascii_uppercase(),
+        formats.join(" or .")
+    )
+}
+
+/// The paths of the options that were given.
+pub fn given<'a>(paths: &[Option<&'a PathBuf>]) -> Vec<&'a Path> {
+    paths.iter().flatten().map(|p| p.as_path()).collect()
+}
+
+/// Refuses outputs that name one file twice or name an input: the later
+/// write would silently replace the earlier output, or the input itself.
+pub fn check_distinct(outputs: &[&Path], inputs: &[&Path]) -> anyhow::Result<()> {
+    // The file a path names: resolved where it exists, else its directory
+    // resolved and its name appended.
+    let identity = |p: &Path| -> PathBuf {
+        std::fs::canonicalize(p).unwrap_or_else(|_| {
+            let dir = match p.parent() {
+                Some(d) if !d.as_os_str().is_empty() => d,
+                _ => Path::new("."),
+            };
+            match (std::fs::canonicalize(dir), p.file_name()) {
+                (Ok(d), Some(name)) => d.join(name),
+                _ => p.to_path_buf(),
+            }
+        })
+    };
+    let ins: Vec<PathBuf> = inputs.iter().map(|p| identity(p)).collect();
+    let mut seen: Vec<(PathBuf, &Path)> = Vec::new();
+    for &o in outputs {
+        let id = identity(o);
+        if let Some(k) = ins.iter().position(|i| *i == id) {
+            bail!(
+                "{}: is an input of this command ({}); choose another output name",
+                o.display(),
+                inputs[k].display()
+            );
+        }
+        if let Some((_, first)) = seen.iter().find(|(s, _)| *s == id) {
+            bail!(
+                "{} and {} name the same file; give each output its own name",
+                first.display(),
+                o.display()
+            );
+        }
+        seen.push((id, o));
+    }
+    Ok(())
 }
 
 /// A size in MiB (as [`snell::bench::machine::peak_rss_mib`] reports the

@@ -10,7 +10,7 @@ use snell::film::HitImage;
 use snell::film::metrics::{RgbImage, compare_images, diff_image};
 use snell::scene::Scene;
 
-use super::common::check_output;
+use super::common::{check_distinct, check_format, check_output};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -43,18 +43,64 @@ fn is_hit_image(p: &Path) -> bool {
 pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(d) = &a.diff {
         check_output(d)?;
+        check_format(d, "--diff", &["png"])?;
+        check_distinct(&[d], &[&a.a, &a.b])?;
     }
-    if is_hit_image(&a.a) && is_hit_image(&a.b) {
+    let (hit_a, hit_b) = (is_hit_image(&a.a), is_hit_image(&a.b));
+    if hit_a != hit_b {
+        let (hit, other) = if hit_a { (&a.a, &a.b) } else { (&a.b, &a.a) };
+        anyhow::bail!(
+            "{} is a hit-position EXR but {} is not (missing, a colour image, or without u, v, events channels): compare hits with hits, colour images with colour images",
+            hit.display(),
+            other.display()
+        );
+    }
+    // Options of the other kind of comparison would be ignored silently.
+    if hit_a {
+        anyhow::ensure!(
+            a.diff.is_none(),
+            "--diff draws colour differences; {} and {} are hit-position EXRs",
+            a.a.display(),
+            a.b.display()
+        );
+        anyhow::ensure!(
+            a.checker.is_none() || a.scene.is_none(),
+            "give --checker or --scene, not both"
+        );
+    } else {
+        anyhow::ensure!(
+            a.checker.is_none() && a.scene.is_none() && a.list.is_none(),
+            "--checker, --scene and --list apply to hit-position EXRs; {} and {} are colour images",
+            a.a.display(),
+            a.b.display()
+        );
+    }
+    if hit_a {
         let checker = match (&a.checker, &a.scene) {
             (Some(c), _) => Some(*c),
             (None, Some(s)) => Scene::load(s, &[])?.checker_size(),
             (None, None) => None,
         };
         if let Some(c) = checker {
-            anyhow::ensure!(c.is_finite() && c > 0.0, "--checker must be > 0, got {c}");
+            anyhow::ensure!(
+                c.is_finite() && c > 0.0,
+                "--checker must be a finite number > 0, got {c}"
+            );
         }
-        let ha = HitImage::read_exr(&a.a)?;
-        let hb = HitImage::read_exr(&a.b)?;
+        let (ha, at_a) = HitImage::read_exr_placed(&a.a)?;
+        let (hb, at_b) = HitImage::read_exr_placed(&a.b)?;
+        // Parts of a frame (`render --region`) of one size but from different
+        // places would be compared pixel by pixel as if they were one place.
+        anyhow::ensure!(
+            at_a == at_b,
+            "{} starts at pixel ({}, {}) of its frame, {} at ({}, {}): they cover different regions",
+            a.a.display(),
+            at_a[0],
+            at_a[1],
+            a.b.display(),
+            at_b[0],
+            at_b[1]
+        );
         let c = compare_hits(&ha, &hb, checker)
             .map_err(|e| anyhow::anyhow!("{} vs {}: {e}", a.a.display(), a.b.display()))?;
         let listed = match a.list {

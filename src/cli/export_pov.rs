@@ -31,8 +31,8 @@ pub struct Args {
     /// Use this max_gradient instead of the bound computed from the data.
     #[arg(long, value_name = "G")]
     pub max_gradient: Option<f64>,
-    /// Threads for the printed command lines and for --run.
-    #[arg(long, default_value_t = 2)]
+    /// Threads for the printed command lines and for --run, 1 to 1024.
+    #[arg(long, default_value_t = 2, value_parser = super::common::thread_count)]
     pub threads: usize,
     /// Also run POV-Ray (colour and hit renders) and report its times.
     #[arg(long)]

@@ -8,7 +8,7 @@ use clap::Args as ClapArgs;
 use snell::film::merge::{self, Part};
 use snell::volume::limits::default_memory_limit;
 
-use super::common::check_output;
+use super::common::{check_distinct, check_format, check_output, given};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -26,9 +26,13 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     check_output(&a.output)?;
+    check_format(&a.output, "-o", &["exr"])?;
     if let Some(p) = &a.png {
         check_output(p)?;
+        check_format(p, "--png", &["png"])?;
     }
+    let inputs: Vec<&std::path::Path> = a.parts.iter().map(|p| p.as_path()).collect();
+    check_distinct(&given(&[Some(&a.output), a.png.as_ref()]), &inputs)?;
     let parts: Vec<Part> = a
         .parts
         .iter()

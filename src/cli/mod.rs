@@ -46,7 +46,8 @@ enum Command {
     Merge(merge::Args),
     /// Trace a sphere-phantom scene through its exact analytic spheres (the accuracy reference).
     Reference(reference::Args),
-    /// Compare two hit-position EXRs: hit-error percentiles, validity and event mismatches.
+    /// Compare two hit-position EXRs (hit-error percentiles, validity and event
+    /// mismatches) or two colour images, PNG, JPEG or EXR (RMSE, PSNR, SSIM, a difference map).
     Compare(compare::Args),
     /// Count the cells each classification method tags (BMCC, ACCC, Bezier, exact).
     Classify(classify::Args),

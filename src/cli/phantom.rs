@@ -8,7 +8,7 @@ use clap::{Args as ClapArgs, Subcommand};
 use snell::phantom::{Hole, MarschnerLobbSpec, PhantomFormat, SphereSpec};
 use snell::volume::nrrd;
 
-use super::common::{check_output, triple};
+use super::common::{check_format, check_output, triple};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -113,6 +113,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 seed: s.out.seed,
             };
             check_output(&s.out.output)?;
+            check_format(&s.out.output, "-o", &["nrrd"])?;
             (spec.build()?, s.out)
         }
         Kind::MarschnerLobb(m) => {
@@ -125,6 +126,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 seed: m.out.seed,
             };
             check_output(&m.out.output)?;
+            check_format(&m.out.output, "-o", &["nrrd"])?;
             (spec.build()?, m.out)
         }
     };

@@ -7,7 +7,7 @@ use clap::Args as ClapArgs;
 use snell::reference::Reference;
 use snell::scene::Scene;
 
-use super::common::check_output;
+use super::common::{check_distinct, check_format, check_output, given};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -27,9 +27,12 @@ pub struct Args {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let scene = Scene::load(&a.scene, &a.set)?;
     check_output(&a.hits)?;
+    check_format(&a.hits, "--hits", &["exr"])?;
     if let Some(o) = &a.output {
         check_output(o)?;
+        check_format(o, "-o", &["png"])?;
     }
+    check_distinct(&given(&[Some(&a.hits), a.output.as_ref()]), &[&a.scene])?;
     let r =
         Reference::from_scene(&scene).map_err(|e| anyhow::anyhow!("{}: {e}", a.scene.display()))?;
     if r.approximate_holes > 0 {

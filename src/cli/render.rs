@@ -12,7 +12,7 @@ use snell::render::{self, Prepared};
 use snell::scene::Scene;
 use snell::volume::LoadOptions;
 
-use super::common::check_output;
+use super::common::{check_distinct, check_format, check_output, given};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -34,8 +34,8 @@ pub struct Args {
     /// thread (Chrome trace format: open it in ui.perfetto.dev or chrome://tracing).
     #[arg(long, value_name = "TRACE.json")]
     pub trace: Option<PathBuf>,
-    /// Worker threads (default: all cores).
-    #[arg(long)]
+    /// Worker threads, 1 to 1024 (default: all cores).
+    #[arg(long, value_parser = super::common::thread_count)]
     pub threads: Option<usize>,
     /// Override a scene value, e.g. --set surface.ior=1.33 (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
@@ -51,25 +51,43 @@ pub struct Args {
     /// are bitwise those of a whole-frame render.
     #[arg(long, value_name = "X0,Y0,X1,Y1")]
     pub region: Option<String>,
+    /// Largest working set to allow, e.g. 8G or 1.5G (default: the
+    /// SNELL_MEMORY_LIMIT variable, else 80% of available memory).
+    #[arg(long, value_name = "BYTES")]
+    pub memory_limit: Option<String>,
     /// Do not print the stats table.
     #[arg(short, long)]
     pub quiet: bool,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    if let Some(s) = &a.memory_limit {
+        snell::volume::limits::parse_bytes(s)
+            .with_context(|| format!("--memory-limit: '{s}' is not a size like 512M or 8G"))?;
+        // Every limit check of the scene, its volume and its image reads the
+        // variable, so the flag sets it for them all.
+        // SAFETY: at start-up, before this process starts any other thread.
+        unsafe { std::env::set_var("SNELL_MEMORY_LIMIT", s) };
+    }
     let scene = Scene::load(&a.scene, &a.set)?;
-    for p in [
+    let outputs = given(&[
         Some(&a.output),
         a.hits.as_ref(),
         a.exr.as_ref(),
         a.stats.as_ref(),
         a.trace.as_ref(),
-    ]
-    .into_iter()
-    .flatten()
-    {
+    ]);
+    for p in &outputs {
         check_output(p)?;
     }
+    check_format(&a.output, "-o", &["png"])?;
+    if let Some(h) = &a.hits {
+        check_format(h, "--hits", &["exr"])?;
+    }
+    if let Some(e) = &a.exr {
+        check_format(e, "--exr", &["exr"])?;
+    }
+    check_distinct(&outputs, &[&a.scene])?;
     let window = a
         .region
         .as_deref()

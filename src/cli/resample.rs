@@ -11,7 +11,7 @@ use snell::filter::FilterKind;
 use snell::filter::resample::resample;
 use snell::volume::{SampleType, nrrd};
 
-use super::common::{VolumeArgs, check_output, human_mib, triple};
+use super::common::{VolumeArgs, check_distinct, check_format, check_output, human_mib, triple};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -53,6 +53,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         ),
     };
     check_output(&a.output)?;
+    check_format(&a.output, "-o", &["nrrd"])?;
+    check_distinct(&[&a.output], &[&a.volume])?;
     let opts = a.vol.load_options()?;
     let vol = a.vol.load_with(&a.volume, &opts)?;
     let ty = ty.unwrap_or(match vol.native_type() {

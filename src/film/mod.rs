@@ -409,6 +409,13 @@ impl HitImage {
 
     /// Reads a hit-position EXR (channels `u`, `v`, `events`).
     pub fn read_exr(path: &Path) -> Result<HitImage, FilmError> {
+        Ok(HitImage::read_exr_placed(path)?.0)
+    }
+
+    /// [`HitImage::read_exr`] with the position of its first pixel in the
+    /// frame (the EXR's data window): a part rendered with `--region`
+    /// starts where its region does.
+    pub fn read_exr_placed(path: &Path) -> Result<(HitImage, [i32; 2]), FilmError> {
         let err = |msg: String| FilmError::Read {
             path: path.to_path_buf(),
             msg,
@@ -425,13 +432,15 @@ impl HitImage {
                 .map(|c| c.sample_data.values_as_f32().collect())
                 .ok_or_else(|| err(format!("no channel '{name}' (not a hit-position image)")))
         };
-        Ok(HitImage {
+        let hits = HitImage {
             width: size.width() as u32,
             height: size.height() as u32,
             u: channel("u")?,
             v: channel("v")?,
             events: channel("events")?,
-        })
+        };
+        let at = layer.attributes.layer_position;
+        Ok((hits, [at.x(), at.y()]))
     }
 }
 

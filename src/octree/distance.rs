@@ -68,7 +68,11 @@ impl Proximity {
     /// [`Proximity::build`] with an explicit budget for the octant maps.
     pub fn build_within(tags: &Tags, budget: usize) -> Proximity {
         let bricked = Bricked::new(tags.cells);
-        let reach = if 8 * bricked.len() <= budget {
+        // A lattice with no cells (an axis of one sample) has no maps to
+        // build; no ray enters it.
+        let reach = if bricked.is_empty() {
+            Reach::Centred(Vec::new())
+        } else if 8 * bricked.len() <= budget {
             let mut maps = vec![0u8; 8 * bricked.len()];
             // The lane walk gathers a byte per step from anywhere in them:
             // huge pages spare it most TLB misses on large lattices
@@ -367,6 +371,18 @@ fn centred_map(tags: &Tags) -> Vec<u8> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn a_lattice_without_cells_builds_without_maps() {
+        // A volume with an axis of one sample has no cells.
+        for cells in [[0, 4, 4], [3, 0, 1], [0, 0, 0]] {
+            let tags = Tags::from_words(cells, Vec::new()).unwrap();
+            for budget in [0, OCTANT_BUDGET] {
+                let p = Proximity::build_within(&tags, budget);
+                assert_eq!(p.cells, cells);
+            }
+        }
+    }
 
     fn random_tags(cells: [usize; 3], per_mille: usize) -> (Tags, Vec<[usize; 3]>) {
         let n = cells.iter().product::<usize>();

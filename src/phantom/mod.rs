@@ -206,19 +206,19 @@ impl SphereSpec {
         let finite = |x: f64| x.is_finite();
         if !finite(self.radius) || self.radius < 0.0 {
             return Err(PhantomError::Invalid(format!(
-                "radius {} must be >= 0",
+                "radius {} must be a finite number >= 0",
                 self.radius
             )));
         }
         if !finite(self.sigma) || self.sigma < 0.0 {
             return Err(PhantomError::Invalid(format!(
-                "sigma {} must be >= 0",
+                "sigma {} must be a finite number >= 0",
                 self.sigma
             )));
         }
         if !finite(self.noise) || self.noise < 0.0 {
             return Err(PhantomError::Invalid(format!(
-                "noise {} must be >= 0",
+                "noise {} must be a finite number >= 0",
                 self.noise
             )));
         }
@@ -236,8 +236,8 @@ impl SphereSpec {
                 || h.sigma < 0.0
             {
                 return Err(PhantomError::Invalid(format!(
-                    "hole {:?} needs a finite center and radius, sigma >= 0",
-                    h
+                    "hole at [{}, {}, {}] with radius {} and sigma {} needs a finite center, radius >= 0 and sigma >= 0",
+                    h.center[0], h.center[1], h.center[2], h.radius, h.sigma
                 )));
             }
         }
@@ -420,6 +420,16 @@ fn build_grid(
                 }
             }
         });
+    // Noise or a signal beyond `f32` (a huge `noise`, Marschner–Lobb's
+    // `alpha` at -1) would make a volume no reader accepts.
+    if let Some(i) = samples.iter().position(|v| !v.is_finite()) {
+        let (x, y, z) = (i % nx, i / nx % ny, i / (nx * ny));
+        return Err(PhantomError::Invalid(format!(
+            "sample ({x}, {y}, {z}) is {} in {} (noise or signal out of range)",
+            samples[i],
+            format.sample_type()
+        )));
+    }
     Volume::new(dims, [1.0; 3], format.sample_type(), samples)
         .map_err(|e| PhantomError::Invalid(e.to_string()))
 }

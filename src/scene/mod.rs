@@ -880,7 +880,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         if !(ior.is_finite() && ior > 0.0) {
             return Err(bad(
                 key,
-                format!("index of refraction must be > 0, got {ior}"),
+                format!("index of refraction must be a finite number > 0, got {ior}"),
             ));
         }
     }
@@ -933,7 +933,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             if !(size.is_finite() && size > 0.0) {
                 return Err(bad(
                     "backdrop.checker",
-                    format!("square size must be > 0, got {size}"),
+                    format!("square size must be a finite number > 0, got {size}"),
                 ));
             }
             let colors = b.checker_colors.unwrap_or([[1.0; 3], [0.0; 3]]);
@@ -950,7 +950,10 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
                 )
             })?;
             if !(width.is_finite() && width > 0.0) {
-                return Err(bad("backdrop.width", format!("must be > 0, got {width}")));
+                return Err(bad(
+                    "backdrop.width",
+                    format!("must be a finite number > 0, got {width}"),
+                ));
             }
             let outside = b.outside.unwrap_or(f.image.background);
             check_color(&outside).map_err(|m| bad("backdrop.outside", m))?;

@@ -13,7 +13,8 @@ use super::VolumeError;
 /// grid, the `f32` padded coefficients, and a byte of slack for cell tags.
 pub const WORKING_BYTES_PER_SAMPLE: u64 = 17;
 
-/// Parses `123`, `64K`, `512M`, `20G` (binary units).
+/// Parses `123`, `64K`, `512M`, `1.5G`, `20G` (binary units; a fraction
+/// rounds to whole bytes).
 pub fn parse_bytes(s: &str) -> Option<u64> {
     let s = s.trim();
     let (num, mul) = match s.chars().last()?.to_ascii_uppercase() {
@@ -23,7 +24,14 @@ pub fn parse_bytes(s: &str) -> Option<u64> {
         'T' => (&s[..s.len() - 1], 1u64 << 40),
         _ => (s, 1),
     };
-    num.trim().parse::<u64>().ok()?.checked_mul(mul)
+    let num = num.trim();
+    if let Ok(n) = num.parse::<u64>() {
+        return n.checked_mul(mul);
+    }
+    // A fraction of a unit, e.g. 1.5G.
+    let x = num.parse::<f64>().ok()? * mul as f64;
+    (num.bytes().all(|b| b.is_ascii_digit() || b == b'.') && x < u64::MAX as f64)
+        .then(|| x.round() as u64)
 }
 
 /// Memory the kernel says is available (`MemAvailable`), if it can be read.
@@ -38,11 +46,18 @@ pub fn available_memory() -> Option<u64> {
 
 /// `SNELL_MEMORY_LIMIT` if set and valid, else 80% of available memory, else 16 GiB.
 pub fn default_memory_limit() -> u64 {
-    if let Some(v) = std::env::var("SNELL_MEMORY_LIMIT")
-        .ok()
-        .and_then(|s| parse_bytes(&s))
-    {
-        return v;
+    if let Ok(s) = std::env::var("SNELL_MEMORY_LIMIT") {
+        match parse_bytes(&s) {
+            Some(v) => return v,
+            None => {
+                static WARNED: std::sync::Once = std::sync::Once::new();
+                WARNED.call_once(|| {
+                    eprintln!(
+                        "warning: SNELL_MEMORY_LIMIT='{s}' is not a size like 512M, 1.5G or 8G; ignored"
+                    )
+                });
+            }
+        }
     }
     available_memory().map(|m| m / 5 * 4).unwrap_or(16u64 << 30)
 }
@@ -89,6 +104,25 @@ mod tests {
         assert_eq!(parse_bytes("3g"), Some(3 << 30));
         assert_eq!(parse_bytes("x"), None);
         assert_eq!(parse_bytes("99999999999999T"), None);
+    }
+
+    #[test]
+    fn parses_fractions_and_refuses_signs_and_exponents() {
+        assert_eq!(parse_bytes(" 512m "), Some(512 << 20));
+        assert_eq!(parse_bytes("1.5G"), Some(3 << 29));
+        assert_eq!(parse_bytes("0.5K"), Some(512));
+        for bad in [
+            "",
+            "lots",
+            "-5G",
+            "1e3",
+            "NaN",
+            "inf",
+            "1.5.2G",
+            "99999999999T",
+        ] {
+            assert_eq!(parse_bytes(bad), None, "{bad}");
+        }
     }
 
     #[test]

@@ -466,6 +466,12 @@ pub fn replace_nonfinite(samples: &mut [f32]) {
 
 /// Loads a volume, choosing the reader from `opts.raw` or the file name.
 pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
+    if path.is_dir() {
+        return Err(VolumeError::io(
+            path,
+            std::io::Error::new(std::io::ErrorKind::InvalidInput, "is a directory"),
+        ));
+    }
     if let Some(spec) = &opts.raw {
         return raw::read(path, spec, opts);
     }
