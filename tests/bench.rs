@@ -446,7 +446,26 @@ fn targets_report_every_target() {
             "{want} missing from {names:?}"
         );
     }
-    assert_eq!(rows.len(), 9, "{names:?}");
+    assert_eq!(rows.len(), 13, "{names:?}");
+    // Each dataset's ratio with the default classification and with issue
+    // 4's ACCC (per 8³ sub-cells).
+    for set in ["sphere", "cranium", "lobster", "teapot"] {
+        for method in ["bezier", "accc8"] {
+            assert!(
+                rows.iter().any(|r| {
+                    r["target"]
+                        .as_str()
+                        .unwrap()
+                        .starts_with(&format!("{set}: "))
+                        && r["configuration"]
+                            .as_str()
+                            .unwrap()
+                            .contains(&format!("octree+{method} "))
+                }),
+                "{set} with {method} missing from {names:?}"
+            );
+        }
+    }
     // Issue 7's frames are stated for bspline3 on every scene, the CT
     // scenes included (their scene files use the smoothing spline).
     let frames: Vec<_> = rows
