@@ -495,6 +495,7 @@ impl Cache {
                 (v, hash)
             }
         };
+        check_distance_maps(scene, &volume, opts.memory_limit)?;
         let filter = scene.surface.filter;
         let storage = scene.render.coefficients;
         let centre = scene.surface.iso;
@@ -626,6 +627,33 @@ impl Cache {
             }
         }
     }
+}
+
+/// The distance traversal's maps ([`crate::octree::distance::map_bytes`]),
+/// on top of the working set the volume's loader checked
+/// ([`crate::volume::limits::WORKING_BYTES_PER_SAMPLE`]), which they can
+/// push a third over the limit.
+fn check_distance_maps(scene: &Scene, volume: &Volume, limit: u64) -> Result<(), SceneError> {
+    if scene.render.traversal != Traversal::Distance {
+        return Ok(());
+    }
+    let [x, y, z] = volume.dims();
+    let need = (x as u64 * y as u64 * z as u64)
+        .saturating_mul(crate::volume::limits::WORKING_BYTES_PER_SAMPLE)
+        .saturating_add(crate::octree::distance::map_bytes([x, y, z]));
+    if need <= limit {
+        return Ok(());
+    }
+    let hb = crate::volume::limits::human_bytes;
+    Err(SceneError::Key {
+        path: scene.path.clone(),
+        key: "render.traversal".into(),
+        msg: format!(
+            "the distance traversal over a {x}x{y}x{z} volume needs about {} of memory with its maps, over the limit of {}; use render.traversal = \"octree\" or raise SNELL_MEMORY_LIMIT",
+            hb(need),
+            hb(limit)
+        ),
+    })
 }
 
 // Version 2 ends each file with a checksum of its values (version 1 files

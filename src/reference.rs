@@ -26,6 +26,15 @@ pub enum ReferenceError {
     Anisotropic([f64; 3]),
     #[error("iso-value {iso} is not inside (0, {full}) of the phantom's range: no surface")]
     NoSurface { iso: f64, full: f64 },
+    #[error(
+        "the iso-surface (radius {radius:.3} about [{}, {}, {}]) does not fit in the phantom's {size}³ grid, which clips it: the analytic spheres would not be what a render sees",
+        center[0], center[1], center[2]
+    )]
+    DoesNotFit {
+        radius: f64,
+        center: [f64; 3],
+        size: usize,
+    },
     #[error(transparent)]
     Phantom(#[from] crate::phantom::PhantomError),
 }
@@ -72,7 +81,19 @@ impl Reference {
             return Err(no_surface);
         }
         let r_outer = fringe_radius(spec.radius, spec.sigma, level).ok_or(no_surface.clone())?;
-        let c = DVec3::from_array(spec.center()) * s;
+        // The sampled ball ends at the grid's faces; the analytic one would not.
+        let centre = spec.center();
+        if centre
+            .iter()
+            .any(|&x| x - r_outer < 0.0 || x + r_outer > (spec.size - 1) as f64)
+        {
+            return Err(ReferenceError::DoesNotFit {
+                radius: r_outer,
+                center: centre,
+                size: spec.size,
+            });
+        }
+        let c = DVec3::from_array(centre) * s;
         let mut balls = vec![Ball {
             center: c,
             radius: r_outer * s,

@@ -398,6 +398,7 @@ fn bad(kind: &'static str, what: &'static str, cmd: &str, needles: &[&'static st
         ("{sphere}", path(root().join(SPHERE))),
         ("{lobster}", path(root().join("scenes/lobster.toml"))),
         ("{tooth}", path(data("tooth.nrrd"))),
+        ("{photo}", path(root().join("scenes/sphere-photo.toml"))),
     ];
     Bad {
         kind,
@@ -539,6 +540,24 @@ fn bad_inputs_fail_cleanly_without_output() {
     });
     scene_file(&t, "ior.toml", |s| s.replace("ior = 1.5", "ior = 0.0"));
     scene_file(&t, "ok.toml", |s| s.to_string());
+    scene_file(&t, "scene.pov", |s| s.to_string());
+    // The photograph scene over a JPEG cut short, and over a PNG of its own.
+    let photo_scene = std::fs::read_to_string(root().join("scenes/sphere-photo.toml")).unwrap();
+    let jpeg = std::fs::read(root().join("scenes/photo.jpg")).unwrap();
+    t.write("cut.jpg", &jpeg[..jpeg.len() / 2]);
+    t.write(
+        "cut.toml",
+        photo_scene.replace("photo.jpg", "cut.jpg").as_bytes(),
+    );
+    let mut png = Vec::new();
+    image::RgbImage::from_pixel(4, 4, image::Rgb([200, 100, 50]))
+        .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
+        .unwrap();
+    t.write("bd.png", &png);
+    t.write(
+        "bd.toml",
+        photo_scene.replace("photo.jpg", "bd.png").as_bytes(),
+    );
     // Two parts of one frame, for comparisons of different regions.
     for (name, region) in [("k0", "0,0,64,4"), ("k1", "0,4,64,8")] {
         let o = bin()
@@ -613,6 +632,9 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "--cache is a file", "render {sphere} -o out.png --cache good.txt", &["good.txt", "not a directory"]),
         bad("flag", "merge -o not named .exr", "merge k0.exr k1.exr -o out.png", &["out.png", ".exr"]),
         bad("flag", "merge -o over a part", "merge k0.exr k1.exr -o k1.exr", &["k1.exr", "input"]),
+        bad("flag", "-o over the backdrop photograph", "render bd.toml -o bd.png", &["bd.png", "input"]),
+        bad("flag", "export-pov over its own scene file", "export-pov scene.pov .", &["scene.pov", "input"]),
+        bad("flag", "bench --update a device", "bench --update /dev/null", &["/dev/null", "regular file"]),
         bad("flag", "--set without =", "render {sphere} -o out.png --set nonsense", &["--set nonsense"]),
         bad("flag", "-o into a missing directory", "render {sphere} -o /nonexistent-dir/x.png", &["/nonexistent-dir"]),
         bad("flag", "-o is a directory", "render {sphere} -o .", &["is a directory"]),
@@ -667,6 +689,17 @@ fn bad_inputs_fail_cleanly_without_output() {
         },
         bad("scene", "reference of a scene without a sphere phantom", "reference {lobster} --hits h.exr -o ref.png", &["sphere phantom"]),
         bad("scene", "reference of a phantom of negative radius", "reference {sphere} --hits h.exr --set volume.phantom.radius=-5", &["radius", "-5"]),
+        bad("scene", "reference of a sphere its grid clips", "reference {sphere} --hits h.exr --set volume.phantom.size=16", &["does not fit"]),
+        bad("scene", "spacing ratio beyond 1e6", "render {sphere} -o out.png --set volume.spacing=[1e-15,1,1]", &["volume.spacing", "1e6"]),
+        bad("scene", "a JPEG backdrop cut short", "render cut.toml -o out.png", &["cut.jpg", "end-of-image"]),
+        Bad {
+            env: Some(("SNELL_MEMORY_LIMIT", "4M")),
+            ..bad("scene", "photograph over SNELL_MEMORY_LIMIT=4M", "render {photo} -o out.png --set image.width=16 --set image.height=16", &["photo.jpg", "limit"])
+        },
+        Bad {
+            env: Some(("SNELL_MEMORY_LIMIT", "5M")),
+            ..bad("scene", "distance maps over SNELL_MEMORY_LIMIT=5M", "render {sphere} -o out.png --set image.width=16 --set image.height=16 --set render.traversal=distance", &["render.traversal", "limit"])
+        },
     ];
 
     let before = listing(&t.0);

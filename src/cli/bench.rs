@@ -68,6 +68,10 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    // The file a run of minutes ends by updating is checked before the run.
+    if let Some(u) = &a.update {
+        super::common::check_output(u)?;
+    }
     if a.targets {
         return run_targets(&a);
     }

@@ -11,7 +11,7 @@ use snell::peer::{Interpolation, PeerError};
 use snell::scene::Scene;
 use snell::volume::LoadOptions;
 
-use super::common::check_output;
+use super::common::{check_distinct, check_output};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -70,6 +70,27 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if a.run && !povray::installed() {
         return Err(PeerError::NotInstalled.into());
     }
+    // Every file the export (and --run) may write, checked before any is.
+    let written: Vec<PathBuf> = [
+        povray::DF3_FILE,
+        povray::COLOR_POV,
+        povray::HITS_POV,
+        povray::COLOR_PNG,
+        povray::HITS_PNG,
+        povray::BACKDROP_PNG,
+        povray::MANIFEST,
+    ]
+    .iter()
+    .map(|f| a.dir.join(f))
+    .chain(a.hits.clone())
+    .collect();
+    for w in &written {
+        if w.exists() {
+            check_output(w)?;
+        }
+    }
+    let written: Vec<&std::path::Path> = written.iter().map(|p| p.as_path()).collect();
+    check_distinct(&written, &scene.input_files())?;
     let vol = scene.load_volume(&LoadOptions::default())?;
     std::fs::create_dir_all(&a.dir)
         .with_context(|| format!("{}: cannot create directory", a.dir.display()))?;

@@ -32,7 +32,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         check_output(o)?;
         check_format(o, "-o", &["png"])?;
     }
-    check_distinct(&given(&[Some(&a.hits), a.output.as_ref()]), &[&a.scene])?;
+    check_distinct(
+        &given(&[Some(&a.hits), a.output.as_ref()]),
+        &scene.input_files(),
+    )?;
     let r =
         Reference::from_scene(&scene).map_err(|e| anyhow::anyhow!("{}: {e}", a.scene.display()))?;
     if r.approximate_holes > 0 {

@@ -87,7 +87,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(e) = &a.exr {
         check_format(e, "--exr", &["exr"])?;
     }
-    check_distinct(&outputs, &[&a.scene])?;
+    check_distinct(&outputs, &scene.input_files())?;
     let window = a
         .region
         .as_deref()
@@ -101,6 +101,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .num_threads(threads)
         .build()
         .context("cannot start worker threads")?;
+    // The tile scratch of every worker thread, now that their count is known.
+    scene.check_memory(
+        snell::volume::limits::default_memory_limit(),
+        pool.current_num_threads(),
+    )?;
 
     let mut trace = a.trace.as_ref().map(|_| render::Trace::new());
     let prep_start = Instant::now();

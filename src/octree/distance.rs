@@ -58,6 +58,18 @@ pub fn octant(du: [f64; 3]) -> usize {
     (du[0] < 0.0) as usize | ((du[1] < 0.0) as usize) << 1 | ((du[2] < 0.0) as usize) << 2
 }
 
+/// Bytes the maps of a lattice of `cells` take at their peak: the eight
+/// octant maps within [`OCTANT_BUDGET`], else the centred map and the
+/// linear copy it is built in.
+pub fn map_bytes(cells: [usize; 3]) -> u64 {
+    let n = Bricked::new(cells).len() as u64;
+    if 8 * n <= OCTANT_BUDGET as u64 {
+        8 * n
+    } else {
+        2 * n
+    }
+}
+
 impl Proximity {
     /// Octant maps of `tags` when they fit [`OCTANT_BUDGET`], else the
     /// centred map.

@@ -62,6 +62,9 @@ impl Camera {
             return Err(CameraError::NoDirection);
         }
         let f = f.normalize();
+        // Only up's direction matters: scaled to a largest component of 1,
+        // a huge `up` (1e155) squares without overflow.
+        let up = crate::scene::unit_scale(up);
         let r = f.cross(up);
         if r.length() <= 1e-9 * up.length().max(1e-300) || up.length() == 0.0 {
             return Err(CameraError::UpParallel);

@@ -570,10 +570,25 @@ pub struct Scene {
     pub spacing: Option<[f64; 3]>,
     pub surface: Surface,
     pub backdrop: Backdrop,
+    /// The photograph the backdrop shows, if any, as a path.
+    pub backdrop_image: Option<PathBuf>,
     pub render: RenderSettings,
 }
 
 impl Scene {
+    /// The files the scene reads: its own, its volume file and its
+    /// backdrop photograph (the ones a command must not write over).
+    pub fn input_files(&self) -> Vec<&Path> {
+        let volume = match &self.volume {
+            VolumeSource::File { path, .. } => Some(path.as_path()),
+            VolumeSource::Phantom(_) => None,
+        };
+        std::iter::once(self.path.as_path())
+            .chain(volume)
+            .chain(self.backdrop_image.as_deref())
+            .collect()
+    }
+
     /// Reads, overrides and validates a scene file.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
         let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
@@ -692,14 +707,17 @@ impl Scene {
             }
             .into(),
             msg: format!(
-                "a {}x{} image at {} rays per pixel needs about {} of memory (frame {}, tile scratch {} for {} threads of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples or render.tile, or raise SNELL_MEMORY_LIMIT",
+                "a {}x{} image at {} rays per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples or render.tile, or raise SNELL_MEMORY_LIMIT",
                 self.width,
                 self.height,
                 self.rays_per_pixel(),
                 hb(need),
                 hb(frame),
                 hb(scratch),
-                threads.max(1),
+                match threads.max(1) {
+                    1 => "1 thread".to_string(),
+                    n => format!("{n} threads"),
+                },
                 self.render.tile,
                 self.render.tile,
                 hb(limit)
@@ -750,6 +768,13 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
 
 fn vec3(v: [f64; 3]) -> DVec3 {
     DVec3::from_array(v)
+}
+
+/// `v` divided by its largest absolute component (zero and non-finite
+/// vectors unchanged): the same direction, with a length from 1 to √3.
+pub(crate) fn unit_scale(v: DVec3) -> DVec3 {
+    let m = v.abs().max_element();
+    if m > 0.0 && m.is_finite() { v / m } else { v }
 }
 
 fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
@@ -820,6 +845,9 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
 
     // [volume]
     let v = &f.volume;
+    if let Some(sp) = v.spacing {
+        crate::volume::check_spacing(sp).map_err(|e| bad("volume.spacing", e.to_string()))?;
+    }
     let volume = match (&v.path, &v.phantom) {
         (Some(_), Some(_)) => {
             return Err(bad(
@@ -894,8 +922,10 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
     // [backdrop]
     let b = &f.backdrop;
     let center = vec3(b.center);
-    let normal = vec3(b.normal);
-    let u_raw = vec3(b.u_axis);
+    // Only their directions matter: scaled to a largest component of 1, huge
+    // vectors (1e155) square without overflowing to an infinite length.
+    let normal = unit_scale(vec3(b.normal));
+    let u_raw = unit_scale(vec3(b.u_axis));
     if !(center.is_finite() && normal.is_finite() && u_raw.is_finite()) {
         return Err(bad(
             "backdrop",
@@ -916,6 +946,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
     }
     let u_axis = u_in_plane.normalize();
     let v_axis = normal.cross(u_axis);
+    let backdrop_image = b.image.as_ref().map(|img| base.join(img));
     let pattern = match (b.checker, &b.image) {
         (Some(_), Some(_)) => {
             return Err(bad(
@@ -1086,11 +1117,14 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         spacing: v.spacing,
         surface,
         backdrop,
+        backdrop_image,
         render,
     };
-    // Every core may run a tile (the CLI's `--threads` only lowers that).
-    let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
-    scene.check_memory(crate::volume::limits::default_memory_limit(), threads)?;
+    // One tile at a time, the least any render needs, so that whether a
+    // scene file is accepted does not depend on the machine's cores; a
+    // renderer checks again with its own thread count (`snell render` does
+    // once its pool is built).
+    scene.check_memory(crate::volume::limits::default_memory_limit(), 1)?;
     Ok(scene)
 }
 
@@ -1117,6 +1151,20 @@ fn load_texture(path: &Path, world_width: f64, outside: [f32; 3]) -> Result<Text
             path.display()
         ));
     }
+    // Decoding holds the decoded image, its float copy and the texels: about
+    // 27 bytes a pixel, from a file that may be a few kilobytes.
+    let need = (w as u64) * (h as u64) * 27;
+    let limit = crate::volume::limits::default_memory_limit();
+    if need > limit {
+        let hb = crate::volume::limits::human_bytes;
+        return Err(format!(
+            "{}: a {w}x{h} photograph needs about {} of memory to decode, over the limit of {}; use a smaller image or raise SNELL_MEMORY_LIMIT",
+            path.display(),
+            hb(need),
+            hb(limit)
+        ));
+    }
+    check_jpeg_end(path)?;
     let img = image::ImageReader::open(path)
         .and_then(|r| r.with_guessed_format())
         .map_err(|e| format!("{}: {e}", path.display()))?
@@ -1131,6 +1179,32 @@ fn load_texture(path: &Path, world_width: f64, outside: [f32; 3]) -> Result<Text
         world_width,
         outside,
     })
+}
+
+/// A JPEG cut short decodes without complaint (the missing rows come out
+/// grey), so its end-of-image marker is looked for near the end of the file
+/// (some writers pad after it).
+fn check_jpeg_end(path: &Path) -> Result<(), String> {
+    use std::io::{Read, Seek, SeekFrom};
+    let err = |e: std::io::Error| format!("{}: {e}", path.display());
+    let mut f = std::fs::File::open(path).map_err(err)?;
+    let mut head = [0u8; 3];
+    if f.read(&mut head).map_err(err)? < 3 || head != [0xFF, 0xD8, 0xFF] {
+        return Ok(()); // not a JPEG
+    }
+    let len = f.metadata().map_err(err)?.len();
+    let tail_len = len.min(4096);
+    f.seek(SeekFrom::Start(len - tail_len)).map_err(err)?;
+    let mut tail = vec![0u8; tail_len as usize];
+    f.read_exact(&mut tail).map_err(err)?;
+    if tail.windows(2).any(|w| w == [0xFF, 0xD9]) {
+        Ok(())
+    } else {
+        Err(format!(
+            "{}: JPEG without its end-of-image marker (a truncated file?)",
+            path.display()
+        ))
+    }
 }
 
 #[cfg(test)]

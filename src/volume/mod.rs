@@ -325,8 +325,24 @@ pub(crate) fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
             spacing
         )));
     }
+    // Beyond this the world-to-grid arithmetic rounds the thinnest axis
+    // away (at 1e15 rays passed through the sphere's surface); no scanner
+    // comes near it.
+    let (lo, hi) = spacing
+        .iter()
+        .fold((f64::INFINITY, 0.0f64), |(lo, hi), &s| {
+            (lo.min(s), hi.max(s))
+        });
+    if hi > MAX_SPACING_RATIO * lo {
+        return Err(VolumeError::Invalid(format!(
+            "spacing {spacing:?}: its axes differ by more than a factor {MAX_SPACING_RATIO:e}"
+        )));
+    }
     Ok(())
 }
+
+/// Largest ratio between the spacings of two axes.
+pub const MAX_SPACING_RATIO: f64 = 1e6;
 
 /// Number of samples for `dims`, or an error when the product overflows or the
 /// working set (samples plus prefiltered coefficients, `f32` each) would exceed

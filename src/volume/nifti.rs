@@ -79,7 +79,15 @@ fn decode(
 ) -> Result<Volume, VolumeError> {
     let (samples, replaced) =
         decode_samples(path, bytes, h.ty, h.endian, count, h.scale, opts.allow_nan)?;
-    finish_volume(path, h.dims, h.spacing, h.ty, samples, replaced)
+    // Scaled samples are real numbers, whatever the stored integers were: a
+    // u16 CT with `scl_inter = -1024` holds negative values, which `snell
+    // resample` would clamp to 0 if the volume still called itself u16.
+    let ty = if h.scale.is_some() {
+        SampleType::F32
+    } else {
+        h.ty
+    };
+    finish_volume(path, h.dims, h.spacing, ty, samples, replaced)
 }
 
 /// Uncompressed: decode straight from a map of the file. Bytes after the image
