@@ -45,10 +45,15 @@ fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> 
             Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
                 out.push(DVec3::new(v[0], v[1], v[2]))
             }
-            _ => bail!(
-                "{name}: line {}: expected three finite numbers x,y,z, got '{t}'",
-                n + 1
-            ),
+            _ => {
+                // A line of megabytes quoted whole would bury the message.
+                let shown: String = t.chars().take(80).collect();
+                let more = if shown.len() < t.len() { "…" } else { "" };
+                bail!(
+                    "{name}: line {}: expected three finite numbers x,y,z, got '{shown}{more}'",
+                    n + 1
+                )
+            }
         }
     }
     Ok(out)

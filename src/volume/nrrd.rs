@@ -3,8 +3,10 @@
 //!
 //! Only what a scalar 3-D grid needs is interpreted: type, dimension, sizes,
 //! endian, encoding, spacing (from `space directions` or `spacings`), skips and
-//! the data file. Orientation, origin, kinds and key/value pairs are ignored:
-//! the renderer works in grid coordinates × spacing (see SPEC.md).
+//! the data file, and `kinds` only to refuse an axis of components (colour,
+//! vector) that would otherwise be read as a spatial one. Orientation, origin
+//! and key/value pairs are ignored: the renderer works in grid coordinates ×
+//! spacing (see SPEC.md).
 //!
 //! Every size a header claims is checked before it is used to allocate, seek or
 //! slice, so a hostile header ends in an error naming the file, never a panic
@@ -154,6 +156,8 @@ struct Fields {
     byte_skip: Option<i64>,
     line_skip: Option<u64>,
     data_file: Option<String>,
+    /// One word per axis, as written (`domain`, `RGB-color`, ...).
+    kinds: Option<Vec<String>>,
 }
 
 /// Reads the header up to the blank line that ends it (or the end of the file,
@@ -374,7 +378,11 @@ fn parse_line(
             }
             set_once(&mut fields.data_file, value.to_string(), &bad)
         }
-        // Everything else (space, space origin, kinds, centers, content, ...)
+        "kinds" => {
+            let kinds = value.split_whitespace().map(str::to_string).collect();
+            set_once(&mut fields.kinds, kinds, &bad)
+        }
+        // Everything else (space, space origin, centers, content, ...)
         // does not change how the samples are read.
         _ => Ok(()),
     }
@@ -549,6 +557,29 @@ impl Layout {
                     join(sizes)
                 ),
             ));
+        }
+        // An axis of colour or vector components (`kinds: RGB-color domain
+        // domain`) would be read as a spatial one: three scalar slices.
+        if let Some(kinds) = &f.kinds {
+            let spatial = |k: &str| {
+                matches!(
+                    k.to_ascii_lowercase().as_str(),
+                    "domain" | "space" | "time" | "???" | "none"
+                )
+            };
+            if let Some((a, k)) = kinds
+                .iter()
+                .enumerate()
+                .find(|&(a, k)| sizes.get(a).is_some_and(|&n| n > 1) && !spatial(k))
+            {
+                return Err(VolumeError::unsupported(
+                    path,
+                    format!(
+                        "axis {a} is of kind '{}', not a spatial axis: only scalar volumes are supported",
+                        excerpt(k)
+                    ),
+                ));
+            }
         }
         let dims: [usize; 3] = std::array::from_fn(|a| sizes.get(a).copied().unwrap_or(1));
 
@@ -1022,6 +1053,25 @@ mod tests {
     fn layout(text: &str) -> Result<Layout, VolumeError> {
         let (f, _) = header(text)?;
         Layout::from_fields(Path::new("h.nrrd"), &f)
+    }
+
+    #[test]
+    fn non_spatial_kinds_are_refused() {
+        let base = "NRRD0004\ntype: uchar\ndimension: 3\nencoding: raw\n";
+        let with =
+            |sizes: &str, kinds: &str| layout(&format!("{base}sizes: {sizes}\nkinds: {kinds}\n\n"));
+        assert!(with("4 4 4", "domain domain domain").is_ok());
+        assert!(with("4 4 4", "space ??? none").is_ok());
+        // A single component is a scalar whatever its axis is called.
+        assert!(with("1 4 4", "RGB-color domain domain").is_ok());
+        for kinds in [
+            "RGB-color domain domain",
+            "domain 3-vector domain",
+            "domain domain list",
+        ] {
+            let e = with("3 4 4", kinds).unwrap_err().to_string();
+            assert!(e.contains("not a spatial axis"), "{kinds}: {e}");
+        }
     }
 
     #[test]
