@@ -12,8 +12,8 @@ use clap::Parser;
 fn main() -> ExitCode {
     // A closed pipe downstream (`snell info v.nrrd | head -1`) ends the
     // process quietly, as it does other command-line tools, instead of
-    // `println!` panicking on the failed write. Outputs are written
-    // atomically, so none is left half-written.
+    // `println!` panicking on the failed write. Outputs are renamed into
+    // place only when complete, so none is left half-written under its name.
     #[cfg(unix)]
     // SAFETY: restoring a signal's default disposition at start-up, before
     // any other thread exists.

@@ -632,7 +632,8 @@ impl Cache {
 /// The distance traversal's maps ([`crate::octree::distance::map_bytes`]),
 /// on top of the working set the volume's loader checked
 /// ([`crate::volume::limits::WORKING_BYTES_PER_SAMPLE`]), which they can
-/// push a third over the limit.
+/// push nearly half over the limit. A filter's lattice has as many cells as
+/// samples per axis or one fewer: the larger of the two maps is counted.
 fn check_distance_maps(scene: &Scene, volume: &Volume, limit: u64) -> Result<(), SceneError> {
     if scene.render.traversal != Traversal::Distance {
         return Ok(());
@@ -640,7 +641,10 @@ fn check_distance_maps(scene: &Scene, volume: &Volume, limit: u64) -> Result<(),
     let [x, y, z] = volume.dims();
     let need = (x as u64 * y as u64 * z as u64)
         .saturating_mul(crate::volume::limits::WORKING_BYTES_PER_SAMPLE)
-        .saturating_add(crate::octree::distance::map_bytes([x, y, z]));
+        .saturating_add(
+            crate::octree::distance::map_bytes([x, y, z])
+                .max(crate::octree::distance::map_bytes([x, y, z].map(|n| n - 1))),
+        );
     if need <= limit {
         return Ok(());
     }

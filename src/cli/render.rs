@@ -101,10 +101,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .num_threads(threads)
         .build()
         .context("cannot start worker threads")?;
-    // The tile scratch of every worker thread, now that their count is known.
+    // The tile scratch of every worker thread that can have a tile, now that
+    // their count is known.
     scene.check_memory(
         snell::volume::limits::default_memory_limit(),
-        pool.current_num_threads(),
+        pool.current_num_threads()
+            .min(render::tile_count(&scene, window).max(1)),
     )?;
 
     let mut trace = a.trace.as_ref().map(|_| render::Trace::new());

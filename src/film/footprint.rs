@@ -26,8 +26,8 @@ pub const EWA_SIGMA: f64 = 0.288_675_134_594_812_9;
 /// below 6e-7 in one dimension).
 const RADIUS: f64 = 5.0;
 
-/// Most checker lines a thin ellipse's integral crosses before the ellipse is
-/// point-sampled instead (each line costs a normal CDF per quadrature node).
+/// Most checker lines a thin ellipse's integral crosses before one half is
+/// taken instead (each line costs a normal CDF per quadrature node).
 const MAX_TRANSVERSAL_LINES: i64 = 4096;
 
 /// Most inner checker corners evaluated one bivariate normal CDF each.
@@ -100,7 +100,7 @@ pub fn box_coverage(centre: [f64; 2], j: [[f64; 2]; 2], size: f64) -> f64 {
 }
 
 /// Checker squares a footprint may be clipped against, one at a time, before
-/// it is point-sampled instead (see [`checker_coverage`]).
+/// one half is taken instead (see [`checker_coverage`]).
 const MAX_CLIPPED_SQUARES: usize = 16_384;
 
 /// The largest error, as a share of the footprint's area, that the one-half
@@ -116,10 +116,11 @@ const HALF_TOLERANCE: f64 = 1.0 / 64.0;
 /// black lengths differ by at most one square's side `s`, so the white area
 /// differs from half the area `A` by at most `s·min(W, H)/2` for a polygon of
 /// extent `W × H`. A thin sliver along a diagonal stays in squares of one
-/// colour however long it is, so it is clipped square by square. `None` for
-/// a degenerate polygon, one too far out for its squares to be told apart in
-/// `f64`, or a sliver over more than [`MAX_CLIPPED_SQUARES`] squares: the
-/// caller point-samples those, as it does a footprint of no area.
+/// colour however long it is, so it is clipped square by square, up to
+/// [`MAX_CLIPPED_SQUARES`]; a sliver longer still gets one half, the share
+/// of every direction but the exact diagonals. `None` for a degenerate
+/// polygon or one too far out for its squares to be told apart in `f64`:
+/// the caller point-samples those.
 pub fn checker_coverage(quad: &[[f64; 2]; 4], size: f64) -> Option<f64> {
     let area = polygon_area(quad);
     if !area.is_finite() || area <= 1e-18 * size * size {
@@ -149,7 +150,7 @@ pub fn checker_coverage(quad: &[[f64; 2]; 4], size: f64) -> Option<f64> {
     }
     let (j0, j1) = ((v0 / size).floor() as i64, (v1 / size).floor() as i64);
     if j1 - j0 >= MAX_CLIPPED_SQUARES as i64 {
-        return None;
+        return Some(0.5);
     }
     let mut white = 0.0;
     let mut clipped = 0usize;
@@ -176,7 +177,7 @@ pub fn checker_coverage(quad: &[[f64; 2]; 4], size: f64) -> Option<f64> {
         let (i0, i1) = ((lo / size).floor() as i64, (hi / size).floor() as i64);
         clipped += (i1 - i0 + 1) as usize;
         if clipped > MAX_CLIPPED_SQUARES {
-            return None;
+            return Some(0.5);
         }
         // The first even square of the row, then every other one.
         for i in ((i0 + (i0 + j).rem_euclid(2))..=i1).step_by(2) {
@@ -456,7 +457,9 @@ pub fn gaussian_coverage(centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64, size: f
             return 0.5;
         }
         if (m1 - m0) + (k1 - k0) > MAX_TRANSVERSAL_LINES {
-            return parity_white(c[0], c[1]);
+            // Too long to integrate: one half, as for every direction but
+            // the exact diagonals.
+            return 0.5;
         }
     }
     transversal_coverage(c, gu, gv, sigma, (m0, m1), (k0, k1), corners <= 32)
@@ -900,7 +903,7 @@ mod tests {
             [1e5 + 0.25, 1e5 + 0.2],
             [1e5 + 0.2, 1e5 + 0.2],
         ];
-        assert_eq!(checker_coverage(&long, 1.0), None);
+        assert_eq!(checker_coverage(&long, 1.0), Some(0.5));
         let far = [[0.0, 0.0], [1e19, 0.0], [1e19, 1.0], [0.0, 1.0]];
         assert_eq!(checker_coverage(&far, 1.0), Some(0.5));
         let out = [
@@ -918,9 +921,16 @@ mod tests {
         let (c, j) = ([0.5, 0.5], [[300.0, 300.0], [0.001, -0.001]]);
         let (got, want) = (gaussian_coverage(c, j, s, 1.0), brute(c, j, s, 1.0));
         assert!(want > 0.9 && (got - want).abs() < 0.01, "{got} vs {want}");
-        // Wide across both families: one half.
+        // Wide across both families: one half (the Fourier series).
         let got = gaussian_coverage([0.5, 0.5], [[300.0, 0.0], [0.0, 300.0]], s, 1.0);
         assert!((got - 0.5).abs() < 1e-6, "{got}");
+        // Thin across the rows but over 2108 columns and 3 rows (4216
+        // corners, 2110 lines): the variance of u given v proves one half,
+        // exactly, where the integral would give it to a few decimals.
+        assert_eq!(
+            gaussian_coverage([0.5, 1.5], [[730.0, 0.0], [0.0, 0.4]], s, 1.0),
+            0.5
+        );
         for j in [
             [[1e19, 0.0], [0.0, 0.0]],
             [[1e19, 1e19], [1e-3, -1e-3]],

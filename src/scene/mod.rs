@@ -653,6 +653,11 @@ impl Scene {
         if let Some(s) = self.spacing {
             vol.set_spacing(s)?;
         }
+        crate::volume::check_spacing_ratio(vol.spacing()).map_err(|e| SceneError::Key {
+            path: self.path.clone(),
+            key: "volume.spacing".into(),
+            msg: format!("the volume's {e}; set volume.spacing to override it"),
+        })?;
         Ok(vol)
     }
 
@@ -707,7 +712,7 @@ impl Scene {
             }
             .into(),
             msg: format!(
-                "a {}x{} image at {} rays per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples or render.tile, or raise SNELL_MEMORY_LIMIT",
+                "a {}x{} image at {} rays per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples, render.tile or --threads, or raise SNELL_MEMORY_LIMIT (--memory-limit)",
                 self.width,
                 self.height,
                 self.rays_per_pixel(),
@@ -846,7 +851,9 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
     // [volume]
     let v = &f.volume;
     if let Some(sp) = v.spacing {
-        crate::volume::check_spacing(sp).map_err(|e| bad("volume.spacing", e.to_string()))?;
+        crate::volume::check_spacing(sp)
+            .and_then(|()| crate::volume::check_spacing_ratio(sp))
+            .map_err(|e| bad("volume.spacing", e.to_string()))?;
     }
     let volume = match (&v.path, &v.phantom) {
         (Some(_), Some(_)) => {
@@ -1182,22 +1189,16 @@ fn load_texture(path: &Path, world_width: f64, outside: [f32; 3]) -> Result<Text
 }
 
 /// A JPEG cut short decodes without complaint (the missing rows come out
-/// grey), so its end-of-image marker is looked for near the end of the file
-/// (some writers pad after it).
+/// grey), so its markers are walked from the start to the end-of-image
+/// marker that closes the image: segments by their lengths, entropy-coded
+/// data byte by byte. What follows that marker (a phone's motion-photo
+/// video, a trailer) is not looked at. Files that are not JPEGs pass.
 fn check_jpeg_end(path: &Path) -> Result<(), String> {
-    use std::io::{Read, Seek, SeekFrom};
-    let err = |e: std::io::Error| format!("{}: {e}", path.display());
-    let mut f = std::fs::File::open(path).map_err(err)?;
-    let mut head = [0u8; 3];
-    if f.read(&mut head).map_err(err)? < 3 || head != [0xFF, 0xD8, 0xFF] {
-        return Ok(()); // not a JPEG
+    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
+    if !bytes.starts_with(&[0xFF, 0xD8]) {
+        return Ok(());
     }
-    let len = f.metadata().map_err(err)?.len();
-    let tail_len = len.min(4096);
-    f.seek(SeekFrom::Start(len - tail_len)).map_err(err)?;
-    let mut tail = vec![0u8; tail_len as usize];
-    f.read_exact(&mut tail).map_err(err)?;
-    if tail.windows(2).any(|w| w == [0xFF, 0xD9]) {
+    if jpeg_has_end(&bytes) {
         Ok(())
     } else {
         Err(format!(
@@ -1207,9 +1208,62 @@ fn check_jpeg_end(path: &Path) -> Result<(), String> {
     }
 }
 
+/// Whether the JPEG in `b` (starting with SOI) reaches its EOI marker.
+fn jpeg_has_end(b: &[u8]) -> bool {
+    let mut i = 2;
+    let mut in_scan = false;
+    while i + 1 < b.len() {
+        if b[i] != 0xFF {
+            if !in_scan {
+                return false; // not at a marker outside entropy-coded data
+            }
+            i += 1;
+            continue;
+        }
+        let m = b[i + 1];
+        match m {
+            // Stuffed zero, restart markers, fill bytes: still in the scan.
+            0x00 | 0xD0..=0xD7 | 0xFF if in_scan => i += if m == 0xFF { 1 } else { 2 },
+            0xD9 => return true,
+            0xFF => i += 1,
+            0x01 | 0xD0..=0xD7 => i += 2,
+            _ => {
+                // A segment with its length; SOS starts entropy-coded data.
+                if i + 3 >= b.len() {
+                    return false;
+                }
+                let len = u16::from_be_bytes([b[i + 2], b[i + 3]]) as usize;
+                if len < 2 {
+                    return false;
+                }
+                i += 2 + len;
+                in_scan = m == 0xDA;
+            }
+        }
+    }
+    false
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn jpeg_end_is_found_past_segments_and_scans() {
+        let jpeg = std::fs::read(
+            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/photo.jpg"),
+        )
+        .unwrap();
+        assert!(jpeg_has_end(&jpeg));
+        // Data after the image (a motion photo's video) does not matter.
+        let mut trailed = jpeg.clone();
+        trailed.extend(std::iter::repeat_n(0x42, 100_000));
+        assert!(jpeg_has_end(&trailed));
+        // Cut anywhere before its end, it is refused.
+        for cut in [4, 100, jpeg.len() / 3, jpeg.len() / 2, jpeg.len() - 2] {
+            assert!(!jpeg_has_end(&jpeg[..cut]), "cut at {cut}");
+        }
+    }
 
     const SCENE: &str = r#"
 [image]

@@ -325,9 +325,15 @@ pub(crate) fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
             spacing
         )));
     }
-    // Beyond this the world-to-grid arithmetic rounds the thinnest axis
-    // away (at 1e15 rays passed through the sphere's surface); no scanner
-    // comes near it.
+    Ok(())
+}
+
+/// Refuses spacings whose axes differ by more than [`MAX_SPACING_RATIO`]:
+/// beyond it the world-to-grid arithmetic rounds the thinnest axis away (at
+/// 1e15 rays passed through the sphere's surface); no scanner comes near it.
+/// Checked where a volume is rendered, not where it is read, so that a file
+/// with such a header can still be inspected and its spacing overridden.
+pub fn check_spacing_ratio(spacing: [f64; 3]) -> Result<(), VolumeError> {
     let (lo, hi) = spacing
         .iter()
         .fold((f64::INFINITY, 0.0f64), |(lo, hi), &s| {
