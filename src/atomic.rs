@@ -25,6 +25,19 @@ fn temp_path(path: &Path) -> io::Result<PathBuf> {
     )))
 }
 
+/// Refuses a target that exists and is not a regular file: the rename would
+/// replace a device, FIFO or socket by a plain file. Commands call it before
+/// their work, [`write_atomic`] before every write.
+pub fn check_target(path: &Path) -> io::Result<()> {
+    if fs::metadata(path).is_ok_and(|m| !m.is_file()) {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "not a regular file (a device, FIFO or socket)",
+        ));
+    }
+    Ok(())
+}
+
 /// Writes `path` through `write`, atomically.
 pub fn write_atomic(
     path: &Path,
@@ -44,12 +57,7 @@ pub fn write_atomic(
         },
         _ => path,
     };
-    if fs::metadata(path).is_ok_and(|m| !m.is_file()) {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "not a regular file (a device, FIFO or socket)",
-        ));
-    }
+    check_target(path)?;
     let tmp = temp_path(path)?;
     let file = fs::OpenOptions::new()
         .write(true)

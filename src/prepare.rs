@@ -27,7 +27,7 @@ use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
 use crate::render::PrepareTimes;
 use crate::scene::{RenderSettings, Scene, SceneError, Storage, Traversal, VolumeSource};
-use crate::volume::{LoadOptions, Volume};
+use crate::volume::{LoadOptions, Volume, WordHash};
 
 /// Runs `$body` with `$f` bound to the `&Arc<Field<T>>` inside an
 /// [`AnyField`], whatever its storage `T`.
@@ -665,30 +665,11 @@ fn check_distance_maps(scene: &Scene, volume: &Volume, limit: u64) -> Result<(),
 const FIELD_MAGIC: &[u8; 8] = b"SNLCOEF2";
 const TAGS_MAGIC: &[u8; 8] = b"SNLTAGS2";
 
-/// A running checksum of a cache file's 64-bit values: a damaged file of
-/// the right length (a flipped bit, a block of zeros) would otherwise be
-/// read as good and render a wrong surface.
-#[derive(Clone, Copy)]
-struct Checksum(u64);
-
-impl Checksum {
-    fn new() -> Checksum {
-        Checksum(0x243f_6a88_85a3_08d3)
-    }
-
-    fn add(&mut self, w: u64) {
-        self.0 = (self.0 ^ w)
-            .wrapping_mul(0x9e37_79b9_7f4a_7c15)
-            .rotate_left(29);
-    }
-
-    fn value(self) -> u64 {
-        crate::phantom::mix64(self.0)
-    }
-}
-
-/// Reads the checksum that ends a file and compares it with `sum`.
-fn check_sum(r: &mut impl Read, sum: Checksum) -> std::io::Result<()> {
+/// Reads the checksum that ends a file and compares it with `sum`, the hash
+/// of the file's values: a damaged file of the right length (a flipped bit,
+/// a block of zeros) would otherwise be read as good and render a wrong
+/// surface.
+fn check_sum(r: &mut impl Read, sum: WordHash) -> std::io::Result<()> {
     if read_u64(r)? != sum.value() {
         return Err(bad("checksum mismatch (damaged file)"));
     }
@@ -727,7 +708,7 @@ fn write_field<T: Coefficient>(w: &mut dyn Write, f: &Field<T>) -> std::io::Resu
     let d = f.dims();
     write_u64s(w, &[d[0] as u64, d[1] as u64, d[2] as u64])?;
     write_u64s(w, &[f.coeffs().interior().len() as u64])?;
-    let mut sum = Checksum::new();
+    let mut sum = WordHash::new();
     for v in f.coeffs().interior() {
         let bits = v.to_f64().to_bits();
         sum.add(bits);
@@ -778,7 +759,7 @@ fn read_field<T: Coefficient>(
         return Err(bad("length mismatch"));
     }
     let mut vals = Vec::with_capacity(n as usize);
-    let mut sum = Checksum::new();
+    let mut sum = WordHash::new();
     let mut b = [0u8; 8];
     for _ in 0..n {
         r.read_exact(&mut b)?;
@@ -804,7 +785,7 @@ fn write_tags(w: &mut dyn Write, t: &Tags) -> std::io::Result<()> {
     write_u64s(w, &t.cells.map(|c| c as u64))?;
     write_u64s(w, &[t.words().len() as u64])?;
     write_u64s(w, t.words())?;
-    let mut sum = Checksum::new();
+    let mut sum = WordHash::new();
     t.words().iter().for_each(|&x| sum.add(x));
     write_u64s(w, &[sum.value()])
 }
@@ -825,7 +806,7 @@ fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<Tags> {
     let words = (0..n)
         .map(|_| read_u64(&mut r))
         .collect::<std::io::Result<Vec<u64>>>()?;
-    let mut sum = Checksum::new();
+    let mut sum = WordHash::new();
     words.iter().for_each(|&x| sum.add(x));
     check_sum(&mut r, sum)?;
     let mut b = [0u8; 1];

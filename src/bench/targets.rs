@@ -399,9 +399,9 @@ fn frame_rows(
 
 /// Issue 4's octree over step-0.1 ray casting, per dataset and for each of
 /// [`SPEEDUP_METHODS`]: in each round a step-0.1 frame and each octree's
-/// median frame, one dataset after the other. The events per ray of both (equal counts, not a pixel-by-pixel
-/// comparison: the paper suite's Table 2 has that) show the octree skipped
-/// no crossing the step found.
+/// median frame, one dataset after the other. The events per ray of both
+/// (equal counts, not a pixel-by-pixel comparison: the paper suite's Table
+/// 2 has that) show the octree skipped no crossing the step found.
 fn speedup_rows(
     opts: &TargetOptions,
     cache: &mut Cache,

@@ -47,12 +47,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .collect::<anyhow::Result<_>>()?
     };
     let vol = a.vol.load(&a.volume)?;
-    let (lo, hi) = vol
-        .samples()
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
-            (l.min(v), h.max(v))
-        });
+    let (lo, hi) = vol.value_range();
     if !(a.iso >= lo as f64 && a.iso <= hi as f64) {
         eprintln!(
             "warning: {}: iso-value {} is outside the data range [{lo}, {hi}]; few or no cells hold the surface",

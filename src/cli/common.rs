@@ -142,14 +142,8 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
     if path.is_dir() {
         bail!("{}: is a directory", path.display());
     }
-    // Outputs are written beside the target and renamed over it, which
-    // would replace a device or FIFO by a plain file.
-    if std::fs::metadata(path).is_ok_and(|m| !m.is_file()) {
-        bail!(
-            "{}: is not a regular file (a device, FIFO or socket); outputs go to files",
-            path.display()
-        );
-    }
+    snell::atomic::check_target(path)
+        .map_err(|e| anyhow::anyhow!("{}: is {e}; outputs go to files", path.display()))?;
     Ok(path.to_path_buf())
 }
 

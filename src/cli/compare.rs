@@ -67,15 +67,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.checker.is_none() || a.scene.is_none(),
             "give --checker or --scene, not both"
         );
-    } else {
-        anyhow::ensure!(
-            a.checker.is_none() && a.scene.is_none() && a.list.is_none(),
-            "--checker, --scene and --list apply to hit-position EXRs; {} and {} are colour images",
-            a.a.display(),
-            a.b.display()
-        );
-    }
-    if hit_a {
         let checker = match (&a.checker, &a.scene) {
             (Some(c), _) => Some(*c),
             (None, Some(s)) => Scene::load(s, &[])?.checker_size(),
@@ -140,6 +131,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         }
         return Ok(());
     }
+    anyhow::ensure!(
+        a.checker.is_none() && a.scene.is_none() && a.list.is_none(),
+        "--checker, --scene and --list apply to hit-position EXRs; {} and {} are colour images",
+        a.a.display(),
+        a.b.display()
+    );
     let ia = RgbImage::read(&a.a)?;
     let ib = RgbImage::read(&a.b)?;
     let c = compare_images(&ia, &ib)

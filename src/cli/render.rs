@@ -101,12 +101,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .num_threads(threads)
         .build()
         .context("cannot start worker threads")?;
+    let tiles = render::tile_count(&scene, window);
     // The tile scratch of every worker thread that can have a tile, now that
     // their count is known.
     scene.check_memory(
         snell::volume::limits::default_memory_limit(),
-        pool.current_num_threads()
-            .min(render::tile_count(&scene, window).max(1)),
+        pool.current_num_threads().min(tiles.max(1)),
     )?;
 
     let mut trace = a.trace.as_ref().map(|_| render::Trace::new());
@@ -126,13 +126,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(t) = &mut trace {
         t.prepare(prep_start, prep_start.elapsed(), &prep.times);
     }
-    let (lo, hi) = prep
-        .volume
-        .samples()
-        .iter()
-        .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
-            (l.min(v), h.max(v))
-        });
+    let (lo, hi) = prep.volume.value_range();
     let iso = scene.surface.iso;
     if !(iso >= lo as f64 && iso <= hi as f64) {
         eprintln!(
@@ -140,7 +134,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.scene.display()
         );
     }
-    let tiles = render::tile_count(&scene, window);
     let done = AtomicUsize::new(0);
     let (finished, ended) = mpsc::channel::<()>();
     let frame = std::thread::scope(|s| {

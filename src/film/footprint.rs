@@ -30,6 +30,11 @@ const RADIUS: f64 = 5.0;
 /// taken instead (each line costs a normal CDF per quadrature node).
 const MAX_TRANSVERSAL_LINES: i64 = 4096;
 
+/// Squares (or texels) from the origin beyond which a footprint is not
+/// integrated: past 2^52 neighbouring edges are no longer distinct `f64`
+/// values, and indices must stay far inside `i64`.
+const FAR: f64 = 4.5e15;
+
 /// Most inner checker corners evaluated one bivariate normal CDF each.
 const LATTICE_CORNERS: i64 = 16;
 
@@ -142,9 +147,6 @@ pub fn checker_coverage(quad: &[[f64; 2]; 4], size: f64) -> Option<f64> {
     if squares > 4096.0 && 0.5 * size * (u1 - u0).min(v1 - v0) <= HALF_TOLERANCE * area {
         return Some(0.5);
     }
-    // Square indices as integers: beyond 2^52 squares from the origin
-    // neighbouring squares' edges are no longer distinct `f64` values.
-    const FAR: f64 = 4.5e15;
     if [u0, u1, v0, v1].iter().any(|&x| (x / size).abs() >= FAR) {
         return None;
     }
@@ -401,10 +403,8 @@ pub fn gaussian_coverage(centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64, size: f
     let svv = s2 * (gv[0] * gv[0] + gv[1] * gv[1]);
     let suv = s2 * (gu[0] * gv[0] + gu[1] * gv[1]);
     let (hu, hv) = (RADIUS * suu.sqrt(), RADIUS * svv.sqrt());
-    // Square indices as integers (as `checker_coverage` bounds them): a
-    // footprint further out, or wider, than `f64` tells squares apart is
-    // point-sampled, as a degenerate one is.
-    const FAR: f64 = 4.5e15;
+    // A footprint reaching past [`FAR`] is point-sampled, as a degenerate
+    // one is.
     if !(c[0].abs() + hu < FAR && c[1].abs() + hv < FAR) {
         return parity_white(c[0], c[1]);
     }
@@ -639,9 +639,8 @@ pub fn ewa_texture(t: &Texture, centre: [f64; 2], j: [[f64; 2]; 2], sigma: f64) 
     let det = s2 * s2 * det_jt * det_jt + RECON * (a + c - 2.0 * RECON) + RECON * RECON;
     const R: f64 = 3.0;
     let (hx, hy) = (R * a.sqrt(), R * c.sqrt());
-    // Texel indices as integers: an ellipse too far out or too long for them
-    // (rays grazing the backdrop) is point-sampled.
-    const FAR: f64 = 1e15;
+    // Texel indices as integers: an ellipse past [`FAR`] texels (rays
+    // grazing the backdrop) is point-sampled.
     if !(det.is_finite() && cx.abs() + hx < FAR && cy.abs() + hy < FAR) {
         return t.sample(centre[0], centre[1]);
     }

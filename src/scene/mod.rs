@@ -1158,8 +1158,10 @@ fn load_texture(path: &Path, world_width: f64, outside: [f32; 3]) -> Result<Text
             path.display()
         ));
     }
-    // Decoding holds the decoded image, its float copy and the texels: about
-    // 27 bytes a pixel, from a file that may be a few kilobytes.
+    // Decoding holds the decoded image (3 bytes a pixel), its float copy and
+    // the texels (12 each): 27 bytes a pixel by those buffers' sizes (the
+    // decoder's own scratch not counted), from a file that may be a few
+    // kilobytes.
     let need = (w as u64) * (h as u64) * 27;
     let limit = crate::volume::limits::default_memory_limit();
     if need > limit {

@@ -278,6 +278,15 @@ impl Volume {
         std::array::from_fn(|a| (self.dims[a] - 1) as f64 * self.spacing[a])
     }
 
+    /// The smallest and largest sample (infinities for no samples).
+    pub fn value_range(&self) -> (f32, f32) {
+        self.samples
+            .iter()
+            .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
+                (l.min(v), h.max(v))
+            })
+    }
+
     /// Value range, histogram and suggested iso-values.
     pub fn stats(&self) -> VolumeStats {
         VolumeStats::compute(self)
@@ -287,24 +296,22 @@ impl Volume {
     /// a 64-bit multiply-xorshift over the sample bits, stable across runs
     /// and platforms (unlike `std`'s hasher), about a gigabyte per second.
     pub fn content_hash(&self) -> u64 {
-        const K: u64 = 0x9e37_79b9_7f4a_7c15;
-        let mix = |h: u64, w: u64| (h ^ w).wrapping_mul(K).rotate_left(29);
-        let mut h = 0x243f_6a88_85a3_08d3u64;
+        let mut h = WordHash::new();
         for d in self.dims {
-            h = mix(h, d as u64);
+            h.add(d as u64);
         }
         for sp in self.spacing {
-            h = mix(h, sp.to_bits());
+            h.add(sp.to_bits());
         }
-        h = mix(h, self.native as u64);
+        h.add(self.native as u64);
         let mut pairs = self.samples.chunks_exact(2);
         for p in &mut pairs {
-            h = mix(h, p[0].to_bits() as u64 | (p[1].to_bits() as u64) << 32);
+            h.add(p[0].to_bits() as u64 | (p[1].to_bits() as u64) << 32);
         }
         for v in pairs.remainder() {
-            h = mix(h, v.to_bits() as u64);
+            h.add(v.to_bits() as u64);
         }
-        crate::phantom::mix64(h)
+        h.value()
     }
 }
 
@@ -318,6 +325,29 @@ pub(crate) fn check_dims(dims: [usize; 3]) -> Result<(), VolumeError> {
     Ok(())
 }
 
+/// A 64-bit multiply-xorshift hash of a stream of words, stable across runs
+/// and platforms (unlike `std`'s hasher): [`Volume::content_hash`] and the
+/// disk cache's checksums.
+#[derive(Clone, Copy)]
+pub(crate) struct WordHash(u64);
+
+impl WordHash {
+    pub(crate) fn new() -> WordHash {
+        WordHash(0x243f_6a88_85a3_08d3)
+    }
+
+    #[inline]
+    pub(crate) fn add(&mut self, w: u64) {
+        self.0 = (self.0 ^ w)
+            .wrapping_mul(0x9e37_79b9_7f4a_7c15)
+            .rotate_left(29);
+    }
+
+    pub(crate) fn value(self) -> u64 {
+        crate::phantom::mix64(self.0)
+    }
+}
+
 pub(crate) fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
     if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
         return Err(VolumeError::Invalid(format!(
@@ -329,8 +359,11 @@ pub(crate) fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
 }
 
 /// Refuses spacings whose axes differ by more than [`MAX_SPACING_RATIO`]:
-/// beyond it the world-to-grid arithmetic rounds the thinnest axis away (at
-/// 1e15 rays passed through the sphere's surface); no scanner comes near it.
+/// beyond it the world-to-grid arithmetic rounds the thinnest axis away
+/// (measured before the check, the sphere scene seen along x: at spacing
+/// `[1e-12, 1, 1]` its 1280 refractions, at `[1e-15, 1, 1]` 112 refractions
+/// and 496 reflections, at `[1e-20, 1, 1]` no surface); no scanner comes
+/// near it.
 /// Checked where a volume is rendered, not where it is read, so that a file
 /// with such a header can still be inspected and its spacing overridden.
 pub fn check_spacing_ratio(spacing: [f64; 3]) -> Result<(), VolumeError> {
