@@ -94,6 +94,9 @@ impl VolumeArgs {
     /// [`VolumeArgs::load`] with options already taken from the arguments.
     pub fn load_with(&self, path: &Path, opts: &LoadOptions) -> anyhow::Result<Volume> {
         let mut vol = volume::load(path, opts)?;
+        for w in &vol.warnings {
+            eprintln!("warning: {w}");
+        }
         if vol.replaced_nonfinite > 0 {
             eprintln!(
                 "warning: {}: replaced {} non-finite samples (--allow-nan)",

@@ -126,6 +126,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(t) = &mut trace {
         t.prepare(prep_start, prep_start.elapsed(), &prep.times);
     }
+    for w in &prep.volume.warnings {
+        eprintln!("warning: {w}");
+    }
     let (lo, hi) = prep.volume.value_range();
     let iso = scene.surface.iso;
     if !(iso >= lo as f64 && iso <= hi as f64) {

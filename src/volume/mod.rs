@@ -206,6 +206,9 @@ pub struct Volume {
     samples: Vec<f32>,
     /// Non-finite samples that were replaced on load (`--allow-nan`).
     pub replaced_nonfinite: usize,
+    /// What the reader accepted but the user should hear about (bytes after
+    /// the samples, say), for the caller to print.
+    pub warnings: Vec<String>,
 }
 
 impl Volume {
@@ -236,6 +239,7 @@ impl Volume {
             native,
             samples,
             replaced_nonfinite: 0,
+            warnings: Vec::new(),
         })
     }
 
