@@ -87,6 +87,17 @@ def nrrd_seeds():
             write("nrrd", "%s-%s.nrrd" % (ty, endian), hdr.encode() + b"\n" + body)
             hb = (hdr + "data file: in.raw\nbyte skip: 0\nline skip: 0\n").encode()
             write("nhdr", "%s-%s.nhdr" % (ty, endian), struct.pack("<H", len(hb)) + hb + body)
+    # Ascii data, attached and detached; data split over two files (the
+    # harness writes one data file, so the list names it twice).
+    text = b"1 2, 3\n4 5 6\n7 8 9 10 11 12 13\n"
+    hdr = "NRRD0005\ntype: short\ndimension: 3\nsizes: 3 2 2\nencoding: ascii\n"
+    write("nrrd", "ascii.nrrd", (hdr + "\n").encode() + text)
+    hb = (hdr + "data file: in.raw\n").encode()
+    write("nhdr", "ascii.nhdr", struct.pack("<H", len(hb)) + hb + text)
+    hb = b"NRRD0005\ntype: uchar\ndimension: 3\nsizes: 3 2 2\nencoding: raw\ndata file: LIST\nin.raw\nin.raw\n"
+    write("nhdr", "list.nhdr", struct.pack("<H", len(hb)) + hb + bytes(range(6)))
+    hb = b"NRRD0005\ntype: uchar\ndimension: 3\nsizes: 3 2 2\nencoding: gzip\nbyte skip: -1\ndata file: LIST 2\nin.raw.gz\nin.raw.gz\n"
+    write("nhdr", "list-gzip.nhdr", struct.pack("<H", len(hb)) + hb + gzip.compress(bytes(range(9)), mtime=0))
 
 
 def nifti_seeds():

@@ -112,7 +112,7 @@ fn info_warns_of_data_after_the_samples() {
     let err = stderr(&o);
     assert!(
         err.starts_with("warning: ")
-            && err.contains("long.nrrd: 1 byte after the 8 bytes of samples"),
+            && err.contains("long.nrrd: 1 byte after the 8 samples ignored"),
         "{err}"
     );
 }

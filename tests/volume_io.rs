@@ -774,7 +774,7 @@ fn nrrd_data_after_the_samples_is_left_with_a_warning() {
     assert_eq!(vol.samples()[0], 256.0);
     assert_eq!(vol.warnings.len(), 1, "{:?}", vol.warnings);
     assert!(
-        vol.warnings[0].contains("2 bytes after the 128 bytes"),
+        vol.warnings[0].contains("2 bytes after the 64 samples"),
         "{:?}",
         vol.warnings
     );

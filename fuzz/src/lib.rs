@@ -52,11 +52,13 @@ pub fn options(allow_nan: bool) -> LoadOptions {
 /// ever read the files it wrote.
 pub fn data_file_is_local(header: &[u8]) -> bool {
     let text = String::from_utf8_lossy(header);
-    !text.lines().any(|l| {
+    // From the first `data file` line on: the LIST form names its files on
+    // the lines after it.
+    let mut lines = text.lines().skip_while(|l| {
         let l = l.trim_start().to_ascii_lowercase();
-        (l.starts_with("data file") || l.starts_with("datafile"))
-            && (l.contains('/') || l.contains('\\') || l.contains(".."))
-    })
+        !(l.starts_with("data file") || l.starts_with("datafile"))
+    });
+    !lines.any(|l| l.contains('/') || l.contains('\\') || l.contains(".."))
 }
 
 /// What every load must give: a consistent volume of finite samples, or an

@@ -110,13 +110,13 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             let (vol, extra) = with_data(
                 path, reader, header_len, &layout, need, count, opts, &what, decode,
             )?;
-            (vol, extra.warnings(path, enc, need))
+            (vol, extra.warnings(path, enc, count))
         }
         [data_path] => {
             what.push_str(&format!(" in data file {}", data_path.display()));
             let src = open(data_path)?;
             let (vol, extra) = with_data(path, src, 0, &layout, need, count, opts, &what, decode)?;
-            (vol, extra.warnings(data_path, enc, need))
+            (vol, extra.warnings(data_path, enc, count))
         }
         files => {
             // Each file holds an equal slab along the slowest axes, after
@@ -153,7 +153,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
                         Ok(())
                     },
                 )?;
-                warnings.extend(extra.warnings(data_path, enc, need_each));
+                warnings.extend(extra.warnings(data_path, enc, count_each));
             }
             (decode(&all)?, warnings)
         }
@@ -215,9 +215,9 @@ impl Extra {
         }
     }
 
-    /// The warnings for `path`, a file whose `need` bytes of samples were
-    /// read with `encoding`.
-    fn warnings(self, path: &Path, encoding: Encoding, need: u64) -> Vec<String> {
+    /// The warnings for `path`, a file whose `count` samples were read with
+    /// `encoding`.
+    fn warnings(self, path: &Path, encoding: Encoding, count: usize) -> Vec<String> {
         let mut out = Vec::new();
         if self.data > 0 {
             let n = self.data;
@@ -229,7 +229,7 @@ impl Extra {
                 (Encoding::Gzip, true) => format!("at least {n} more decompressed bytes"),
             };
             out.push(format!(
-                "{}: {what} after the {need} bytes of samples ignored",
+                "{}: {what} after the {count} samples ignored",
                 path.display()
             ));
         }
