@@ -684,7 +684,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "--dims and --type of a NRRD file", "info {tooth} --dims 10,10,10 --type u8", &["tooth.nrrd", "--dims, --type apply only", "NRRD"]),
         bad("flag", "--spacing whose extent overflows", "info {tooth} --spacing 1e308,1,1", &["--spacing 1e308,1,1", "along x", "overflows"]),
         bad("flag", "--memory-limit a negative size", "info r.raw --dims 2,2,2 --type u8 --memory-limit -2G", &["--memory-limit", "'-2G'", "2GB"]),
-        bad("flag", "sample --lambda above 1e12", "sample {tooth} --filter smooth-bspline3 --lambda 1e20 --points good.txt", &["lambda", "1e12"]),
+        bad("flag", "sample --lambda above 1e12", "sample {tooth} --filter smooth-bspline3 --lambda 1e20 --points good.txt", &["--lambda:", "1e12", "got 1e20"]),
         bad("file", "raw: a directory", "info . --dims 2,2,2 --type u8", &["is a directory"]),
         bad("file", "sample points: a row of two numbers", "sample {tooth} --filter bspline3 --points fields.txt", &["fields.txt", "line 2"]),
         bad("file", "sample points: NaN", "sample {tooth} --filter bspline3 --points nanpts.txt", &["nanpts.txt", "line 3"]),
@@ -742,7 +742,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "--set orthographic height negative", "render {sphere} -o out.png --set camera.kind=orthographic --set camera.height=-1", &["--set camera.height=-1:", "> 0"]),
         bad("scene", "a raw volume without [volume.raw]", "render {cranium} -o out.png --set volume.path={headsq}", &["[volume.path]", "[volume.raw]", "dims", "type"]),
         bad("scene", "--set a checker and an image backdrop", "render {sphere} -o out.png --set backdrop.image=\"photo.jpg\"", &["backdrop"]),
-        bad("scene", "phantom over the memory limit", "render {sphere} -o out.png --set volume.phantom.size=4096", &["phantom", "limit"]),
+        bad("scene", "phantom over the memory limit", "render {sphere} -o out.png --set volume.phantom.size=4096", &["[volume.phantom.size]", "limit"]),
         bad("scene", "phantom beyond 4096 samples a side", "render {sphere} -o out.png --set volume.phantom.size=100000", &["--set volume.phantom.size=100000:", "from 1 to 4096"]),
         Bad {
             env: Some(("SNELL_MEMORY_LIMIT", "1M")),

@@ -56,7 +56,10 @@ pub enum FilterError {
         "unknown filter '{0}' (expected one of: linear, catmull-rom, bspline2 .. bspline7, smooth-bspline3)"
     )]
     Unknown(String),
-    #[error("the smoothing weight λ must be a number from 0 to 1e12, got {0}")]
+    #[error(
+        "the smoothing weight λ must be a number from 0 to 1e12, got {}",
+        crate::human::num(*.0)
+    )]
     BadLambda(f64),
     #[error(
         "smooth-bspline3 needs its smoothing weight λ (0 to 1e12; 1 smooths away u8 rounding noise, 0 is bspline3)"

@@ -694,7 +694,11 @@ impl Scene {
                 // Against the caller's limit, before the grid is allocated.
                 crate::volume::checked_sample_count(&self.path, spec.dims(), opts.memory_limit)
                     .map_err(|e| match e {
-                        VolumeError::TooLarge { msg, .. } => phantom_error(msg),
+                        VolumeError::TooLarge { msg, .. } => SceneError::Key {
+                            path: self.path.clone(),
+                            key: "volume.phantom.size".into(),
+                            msg,
+                        },
                         e => phantom_error(e.to_string()),
                     })?;
                 spec.build().map_err(|e| match e {
