@@ -78,12 +78,13 @@ pub struct MlArgs {
     /// paper's lattice).
     #[arg(long, default_value_t = 41, value_parser = phantom_size)]
     pub size: usize,
-    /// The signal's α: the weight of the radial ripple against the slope
-    /// along z (finite; Marschner & Lobb use 0.25).
+    /// The signal's α: the amplitude of the radial ripple against the
+    /// slope along z, (1 − sin(πz/2) + α(1 + ρ(r))) / (2(1 + α)) (finite;
+    /// Marschner & Lobb use 0.25).
     #[arg(long, default_value_t = 0.25, allow_negative_numbers = true)]
     pub alpha: f64,
-    /// The ripple's frequency f_M in cycles over the unit radius (finite;
-    /// Marschner & Lobb use 6).
+    /// The frequency f_M of the radial ripple ρ(r) = cos(2π f_M cos(πr/2))
+    /// (finite; Marschner & Lobb use 6).
     #[arg(long, default_value_t = 6.0, allow_negative_numbers = true)]
     pub fm: f64,
     #[command(flatten)]
