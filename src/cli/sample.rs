@@ -71,7 +71,9 @@ fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> 
             .collect();
         let vals: Option<Vec<f64>> = parts.iter().map(|p| p.parse::<f64>().ok()).collect();
         match vals {
-            Some(v) if v.len() == columns && v[..3].iter().all(|x| x.is_finite()) => {
+            Some(v)
+                if (v.len() == 3 || v.len() == columns) && v[..3].iter().all(|x| x.is_finite()) =>
+            {
                 out.push(DVec3::new(v[0], v[1], v[2]))
             }
             _ => {
@@ -81,7 +83,7 @@ fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> 
                 let what = if columns == 3 {
                     "three finite numbers x,y,z".to_string()
                 } else {
-                    format!("{columns} numbers as the header names, x,y,z finite")
+                    format!("three finite numbers x,y,z (or {columns}, as the header names)")
                 };
                 bail!(
                     "{name}: line {}: expected {what}, got '{shown}{more}'",
@@ -137,10 +139,13 @@ mod tests {
         )
         .unwrap();
         assert_eq!(p, vec![DVec3::new(1.0, 2.0, 3.0)]);
-        let e = parse_points("x,y,z,value\n1,2,3\n".as_bytes(), "p")
+        let e = parse_points("x,y,z,value\n1,2\n".as_bytes(), "p")
             .unwrap_err()
             .to_string();
-        assert!(e.contains("line 2: expected 4 numbers"), "{e}");
+        assert!(
+            e.contains("line 2: expected three") && e.contains("or 4"),
+            "{e}"
+        );
         let e = parse_points("1,2,3\nx,y,z\n".as_bytes(), "p")
             .unwrap_err()
             .to_string();
