@@ -725,7 +725,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "--set unknown traversal", "render {sphere} -o out.png --set render.traversal=teleport", &["render.traversal", "teleport"]),
         bad("scene", "--set iso NaN", "render {sphere} -o out.png --set surface.iso=nan", &["surface.iso", "NaN"]),
         bad("scene", "--set fov_y 180", "render {sphere} -o out.png --set camera.fov_y=180", &["camera.fov_y"]),
-        bad("scene", "smooth-bspline3 without lambda", "render {sphere} -o out.png --set surface.filter=smooth-bspline3", &["[surface.lambda]", "needs lambda"]),
+        bad("scene", "smooth-bspline3 without lambda", "render {sphere} -o out.png --set surface.filter=smooth-bspline3", &["--set surface.filter=smooth-bspline3:", "[surface.lambda]", "needs lambda"]),
         bad("scene", "--set lambda negative", "render {sphere} -o out.png --set surface.lambda=-1", &["--set surface.lambda=-1:", "0 to 1e12"]),
         bad("scene", "seed beyond TOML's integers", "render seed.toml -o out.png", &["seed.toml", "[render.seed]", "up to 9223372036854775807", "18446744073709551615"]),
         bad("scene", "--set seed beyond TOML's integers", "render {sphere} -o out.png --set render.seed=18446744073709551615", &["--set render.seed=18446744073709551615:", "up to 9223372036854775807"]),

@@ -1083,6 +1083,18 @@ fn blame_override(e: SceneError, overrides: &[String]) -> SceneError {
         let k = set_key(o);
         key == k || key.starts_with(&format!("{k}.")) || key.starts_with(&format!("{k}["))
     });
+    // A missing lambda is the fault of the override that chose the
+    // smoothing spline.
+    let culprit = culprit.or_else(|| {
+        (key == "surface.lambda" && msg.contains("needs lambda"))
+            .then(|| {
+                overrides
+                    .iter()
+                    .rev()
+                    .find(|o| set_key(o) == "surface.filter")
+            })
+            .flatten()
+    });
     match culprit {
         Some(o) => SceneError::Override {
             arg: o.clone(),
@@ -1928,6 +1940,13 @@ checker = 8.0
         assert!(e.starts_with("--set camera.height=-1: "), "{e}");
         let e = parse(&["surface.lambda=-1"]).unwrap_err().to_string();
         assert!(e.starts_with("--set surface.lambda=-1: "), "{e}");
+        let e = parse(&["surface.filter=smooth-bspline3"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("--set surface.filter=smooth-bspline3: [surface.lambda] "),
+            "{e}"
+        );
     }
 
     /// Settings written but unused are reported; defaults and used
