@@ -19,6 +19,7 @@ pub mod compare;
 pub mod film;
 pub mod filter;
 pub mod heap;
+pub mod human;
 pub mod lattice;
 pub mod octree;
 pub mod peer;

@@ -420,6 +420,7 @@ fn clearing_crossing_cells_changes_no_bit() {
             &[
                 "volume.phantom.noise=6",
                 "surface.filter=smooth-bspline3",
+                "surface.lambda=0",
                 "render.traversal=distance",
             ],
         ),

@@ -221,8 +221,6 @@ fn resample_upsamples_a_scan_that_renders() {
         "--set",
         "surface.filter=bspline3",
         "--set",
-        "surface.lambda=0",
-        "--set",
         "image.width=96",
         "--set",
         "image.height=96",
@@ -414,8 +412,9 @@ struct Bad {
     env: Option<(&'static str, &'static str)>,
 }
 
-/// `cmd` is split at spaces; `{sphere}`, `{lobster}` and `{tooth}` stand for
-/// the paths of scenes/sphere.toml, scenes/lobster.toml and the tooth CT.
+/// `cmd` is split at spaces; `{sphere}`, `{lobster}`, `{photo}`,
+/// `{cranium}`, `{tooth}` and `{headsq}` stand for the paths of those scenes
+/// in scenes/ and of the tooth CT and the raw head CT.
 fn bad(kind: &'static str, what: &'static str, cmd: &str, needles: &[&'static str]) -> Bad {
     let path = |p: PathBuf| p.to_str().unwrap().to_string();
     let vars = [
@@ -423,6 +422,11 @@ fn bad(kind: &'static str, what: &'static str, cmd: &str, needles: &[&'static st
         ("{lobster}", path(root().join("scenes/lobster.toml"))),
         ("{tooth}", path(data("tooth.nrrd"))),
         ("{photo}", path(root().join("scenes/sphere-photo.toml"))),
+        ("{cranium}", path(root().join("scenes/cranium.toml"))),
+        (
+            "{headsq}",
+            path(data("headsq-quarter-ct_64x64x93_u16le.raw")),
+        ),
     ];
     Bad {
         kind,
@@ -607,6 +611,31 @@ fn bad_inputs_fail_cleanly_without_output() {
         )
     });
     scene_file(&t, "syntax.toml", |s| s.replace("[image]", "[image"));
+    scene_file(&t, "seed.toml", |s| {
+        s.replace("[render]", "[render]\nseed = 18446744073709551615")
+    });
+    scene_file(&t, "far.toml", |s| {
+        s.replace(
+            "position = [31.5, 31.5, -150.0]",
+            "position = [31.5, 31.5, -1e307]",
+        )
+    });
+    scene_file(&t, "iortext.toml", |s| {
+        s.replace("ior = 1.5", "ior = \"1.5\"")
+    });
+    scene_file(&t, "wfloat.toml", |s| {
+        s.replace("width = 512", "width = 32.0")
+    });
+    scene_file(&t, "negsize.toml", |s| s.replace("size = 64", "size = -64"));
+    scene_file(&t, "u12.toml", |s| {
+        s.replace("format = \"u8\"", "format = \"u12\"")
+    });
+    scene_file(&t, "bigiso.toml", |s| {
+        s.replace("iso = 127.5", "iso = 1e400")
+    });
+    scene_file(&t, "negradius.toml", |s| {
+        s.replace("radius = 20.0", "radius = -20.0")
+    });
     scene_file(&t, "size.toml", |s| s.replace("width = 512", "width = 0"));
 
     // One line per case: kind, what, command, words the message must hold.
@@ -667,8 +696,22 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "-o is a directory", "render {sphere} -o .", &["is a directory"]),
         bad("flag", "--hits into a missing directory", "render {sphere} -o out.png --hits /nonexistent-dir/h.exr", &["/nonexistent-dir"]),
         bad("flag", "sample --filter unknown", "sample {tooth} --filter gauss --points good.txt", &["gauss"]),
-        bad("flag", "sample --lambda negative", "sample {tooth} --filter smooth-bspline3 --lambda -1 --points good.txt", &["lambda"]),
-        bad("flag", "sample --lambda above 1e12", "sample {tooth} --filter smooth-bspline3 --lambda 1e20 --points good.txt", &["lambda", "1e12"]),
+        bad("flag", "sample --lambda negative", "sample {tooth} --filter smooth-bspline3 --lambda -1 --points good.txt", &["--lambda:", "0 to 1e12", "-1"]),
+        bad("flag", "sample --lambda with a filter that does not smooth", "sample {tooth} --filter bspline3 --lambda 1 --points good.txt", &["--lambda 1", "--filter bspline3"]),
+        bad("flag", "sample smooth-bspline3 without --lambda", "sample {tooth} --filter smooth-bspline3 --points good.txt", &["smooth-bspline3", "needs --lambda"]),
+        bad("flag", "resample --lambda with a filter that does not smooth", "resample {tooth} -o up.nrrd --size 8,8,8 --lambda 1", &["--lambda", "--filter bspline3"]),
+        bad("flag", "classify --lambda with a filter that does not smooth", "classify {tooth} --filter linear --lambda 1 --iso 100", &["--lambda", "--filter linear"]),
+        bad("flag", "classify --methods unknown", "classify {tooth} --filter linear --iso 100 --methods foo", &["'foo'", "bezier0", "exact"]),
+        bad("flag", "compare --checker negative", "compare k0.exr k0.exr --checker -1", &["--checker", "-1"]),
+        bad("flag", "info --offset negative", "info r.raw --dims 2,2,2 --type u8 --offset -1", &["--offset", "whole number of bytes"]),
+        bad("flag", "info --spacing negative", "info r.raw --dims 2,2,2 --type u8 --spacing -1,1,1", &["r.raw", "--spacing -1,1,1", "> 0"]),
+        bad("flag", "phantom --radius negative", "phantom sphere --radius -3 -o p.nrrd", &["--radius", "-3"]),
+        bad("flag", "--endian of a NRRD file", "info {tooth} --endian big", &["tooth.nrrd", "--endian applies only to headerless raw"]),
+        bad("flag", "--offset of a NRRD file", "info {tooth} --offset 100", &["tooth.nrrd", "--offset applies only to headerless raw"]),
+        bad("flag", "--dims and --type of a NRRD file", "info {tooth} --dims 10,10,10 --type u8", &["tooth.nrrd", "--dims, --type apply only", "NRRD"]),
+        bad("flag", "--spacing whose extent overflows", "info {tooth} --spacing 1e308,1,1", &["--spacing 1e308,1,1", "along x", "overflows"]),
+        bad("flag", "--memory-limit a negative size", "info r.raw --dims 2,2,2 --type u8 --memory-limit -2G", &["--memory-limit", "'-2G'", "2GB"]),
+        bad("flag", "sample --lambda above 1e12", "sample {tooth} --filter smooth-bspline3 --lambda 1e20 --points good.txt", &["--lambda:", "1e12", "got 1e20"]),
         bad("file", "raw: a directory", "info . --dims 2,2,2 --type u8", &["is a directory"]),
         bad("file", "sample points: a row of two numbers", "sample {tooth} --filter bspline3 --points fields.txt", &["fields.txt", "line 2"]),
         bad("file", "sample points: NaN", "sample {tooth} --filter bspline3 --points nanpts.txt", &["nanpts.txt", "line 3"]),
@@ -680,7 +723,8 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("file", "resample: input missing", "resample missing.nrrd -o up.nrrd --size 8,8,8", &["missing.nrrd"]),
         bad("flag", "resample -o into a missing directory", "resample {tooth} -o /nonexistent-dir/up.nrrd --size 8,8,8", &["/nonexistent-dir"]),
         bad("file", "resample: lattice over the memory limit", "resample {tooth} -o up.nrrd --size 2048,2048,2048", &["tooth.nrrd", "2048x2048x2048", "limit"]),
-        bad("flag", "phantom --size 0", "phantom sphere --size 0 -o p.nrrd", &["size"]),
+        bad("flag", "phantom --size 0", "phantom sphere --size 0 -o p.nrrd", &["--size", "from 1 to 4096"]),
+        bad("flag", "phantom --size beyond 4096", "phantom sphere --size 5000 -o p.nrrd", &["--size", "from 1 to 4096", "5000"]),
         bad("flag", "phantom --format unknown", "phantom sphere --format u3 -o p.nrrd", &["--format", "u3"]),
         bad("flag", "phantom --hole with two numbers", "phantom sphere --hole 1,2 -o p.nrrd", &["--hole"]),
         bad("flag", "phantom --noise beyond f32", "phantom sphere --size 8 --noise 1e39 --format f32 -o p.nrrd", &["phantom", "f32"]),
@@ -708,8 +752,25 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "--set unknown traversal", "render {sphere} -o out.png --set render.traversal=teleport", &["render.traversal", "teleport"]),
         bad("scene", "--set iso NaN", "render {sphere} -o out.png --set surface.iso=nan", &["surface.iso", "NaN"]),
         bad("scene", "--set fov_y 180", "render {sphere} -o out.png --set camera.fov_y=180", &["camera.fov_y"]),
+        bad("scene", "smooth-bspline3 without lambda", "render {sphere} -o out.png --set surface.filter=smooth-bspline3", &["--set surface.filter=smooth-bspline3:", "[surface.lambda]", "needs lambda"]),
+        bad("scene", "--set lambda negative", "render {sphere} -o out.png --set surface.lambda=-1", &["--set surface.lambda=-1:", "0 to 1e12"]),
+        bad("scene", "seed beyond TOML's integers", "render seed.toml -o out.png", &["seed.toml", "[render.seed]", "up to 9223372036854775807", "18446744073709551615"]),
+        bad("scene", "--set seed beyond TOML's integers", "render {sphere} -o out.png --set render.seed=18446744073709551615", &["--set render.seed=18446744073709551615:", "up to 9223372036854775807"]),
+        bad("scene", "camera position too far out", "render far.toml -o out.png", &["far.toml", "[camera.position]", "1e150", "-1e307"]),
+        bad("scene", "ior as text", "render iortext.toml -o out.png", &["[surface.ior]", "expected a number, got the text \"1.5\""]),
+        bad("scene", "image width with a fraction", "render wfloat.toml -o out.png", &["[image.width]", "expected a whole number from 0 to 4294967295, got 32.0"]),
+        bad("scene", "--set a section to a number", "render {sphere} -o out.png --set surface=3", &["--set surface=3:", "expected a table of surface settings, got 3"]),
+        bad("scene", "phantom size negative", "render negsize.toml -o out.png", &["negsize.toml", "[volume.phantom.size]", "got -64"]),
+        bad("scene", "phantom format unknown", "render u12.toml -o out.png", &["u12.toml", "[volume.phantom.format]", "u12"]),
+        bad("scene", "iso beyond f64", "render bigiso.toml -o out.png", &["bigiso.toml", "[surface.iso]", "1e400", "finite"]),
+        bad("scene", "--set iso beyond f64", "render {sphere} -o out.png --set surface.iso=1e400", &["--set surface.iso=1e400:", "finite"]),
+        bad("scene", "phantom radius negative", "render negradius.toml -o out.png", &["negradius.toml", "[volume.phantom.radius]", "-20"]),
+        bad("scene", "--set phantom radius negative", "render {sphere} -o out.png --set volume.phantom.radius=-20", &["--set volume.phantom.radius=-20:", ">= 0"]),
+        bad("scene", "--set orthographic height negative", "render {sphere} -o out.png --set camera.kind=orthographic --set camera.height=-1", &["--set camera.height=-1:", "> 0"]),
+        bad("scene", "a raw volume without [volume.raw]", "render {cranium} -o out.png --set volume.path={headsq}", &["[volume.path]", "[volume.raw]", "dims", "type"]),
         bad("scene", "--set a checker and an image backdrop", "render {sphere} -o out.png --set backdrop.image=\"photo.jpg\"", &["backdrop"]),
-        bad("scene", "phantom over the memory limit", "render {sphere} -o out.png --set volume.phantom.size=100000", &["phantom", "limit"]),
+        bad("scene", "phantom over the memory limit", "render {sphere} -o out.png --set volume.phantom.size=4096", &["[volume.phantom.size]", "limit"]),
+        bad("scene", "phantom beyond 4096 samples a side", "render {sphere} -o out.png --set volume.phantom.size=100000", &["--set volume.phantom.size=100000:", "from 1 to 4096"]),
         Bad {
             env: Some(("SNELL_MEMORY_LIMIT", "1M")),
             ..bad("scene", "image over SNELL_MEMORY_LIMIT=1M", "render {sphere} -o out.png --hits h.exr", &["[image]", "limit of 1.0 MiB"])
@@ -779,6 +840,162 @@ fn bad_inputs_fail_cleanly_without_output() {
         std::fs::create_dir_all(&dir).unwrap();
         std::fs::write(Path::new(&dir).join("bad-inputs.md"), &table).unwrap();
     }
+}
+
+/// What a first-time user meets on good input: warnings for settings a
+/// scene writes but does not use (and none for a plain scene), short
+/// numbers in text reports, `sample` reading its own output, sizes with B
+/// and iB and exponents, the help of classify and phantom, export-pov's
+/// threads as render's, and compare's note on a photograph scene.
+#[test]
+fn first_use_messages_warnings_and_help() {
+    let t = Tmp::new("first");
+    let png = t.path("o.png");
+    let small = ["--set", "image.width=8", "--set", "image.height=8", "-q"];
+    let render = |extra: &[&str]| {
+        let mut args = vec!["render", SPHERE, "-o", png.to_str().unwrap()];
+        args.extend_from_slice(&small);
+        args.extend_from_slice(extra);
+        let o = bin().args(&args).current_dir(root()).output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        stderr(&o)
+    };
+    let plain = render(&[]);
+    assert!(!plain.contains("warning:"), "{plain}");
+    let mut ignored = Vec::new();
+    for kv in [
+        "camera.height=3",
+        "backdrop.width=3",
+        "render.step=0.5",
+        "render.samples=3",
+        "render.footprint=ewa",
+        "render.seed=3",
+        "surface.lambda=5",
+    ] {
+        ignored.extend(["--set", kv]);
+    }
+    let e = render(&ignored);
+    for key in [
+        "camera.height",
+        "backdrop.width",
+        "render.step",
+        "render.samples",
+        "render.footprint",
+        "render.seed",
+        "surface.lambda",
+    ] {
+        assert!(
+            e.lines()
+                .any(|l| l.starts_with("warning:") && l.contains(&format!("--set {key}="))),
+            "{key}: {e}"
+        );
+    }
+    // The same settings used: no warning.
+    let e = render(&[
+        "--set",
+        "render.supersampling=footprint",
+        "--set",
+        "render.footprint=ewa",
+        "--set",
+        "render.traversal=step",
+        "--set",
+        "render.classify=none",
+        "--set",
+        "render.step=0.5",
+    ]);
+    assert!(!e.contains("warning:"), "{e}");
+
+    // Text reports: a default f32 phantom's range and the sample CSV.
+    let ph = t.path("p.nrrd");
+    let o = run(&["phantom", "sphere", "-o", ph.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = run(&["info", ph.to_str().unwrap()]);
+    let out = String::from_utf8_lossy(&o.stdout).into_owned();
+    let range = out.lines().find(|l| l.contains("range")).unwrap();
+    assert!(range.len() < 60 && range.contains("e-"), "{range}");
+    let pts = t.write("pts.txt", b"3.3,40.7,31.5\n31.5,31.5,31.5\n");
+    let sample = |points: &Path| {
+        let o = run(&[
+            "sample",
+            ph.to_str().unwrap(),
+            "--filter",
+            "bspline3",
+            "--points",
+            points.to_str().unwrap(),
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        String::from_utf8_lossy(&o.stdout).into_owned()
+    };
+    let csv = sample(&pts);
+    assert!(csv.lines().all(|l| l.len() < 160), "{csv}");
+    // Its own output, header and all, reads back as the same points.
+    let again = t.write("again.csv", csv.as_bytes());
+    assert_eq!(sample(&again), csv);
+
+    for size in ["2GiB", "2GB", "1e9", "512mb"] {
+        let o = run(&["info", ph.to_str().unwrap(), "--memory-limit", size]);
+        assert!(o.status.success(), "{size}: {}", stderr(&o));
+    }
+
+    let help = |args: &[&str]| String::from_utf8_lossy(&run(args).stdout).into_owned();
+    let h = help(&["classify", "--help"]);
+    for word in [
+        "smooth-bspline3",
+        "bezier0",
+        "accc8",
+        "exact",
+        "--lambda <L>",
+    ] {
+        assert!(h.contains(word), "classify --help lacks {word}: {h}");
+    }
+    let h = help(&["phantom", "sphere", "--help"]);
+    assert!(
+        h.contains("Radius of the solid core") && h.contains("grid units"),
+        "{h}"
+    );
+    let h = help(&["phantom", "marschner-lobb", "--help"]);
+    assert!(h.contains("ripple") && h.contains("1 to 4096"), "{h}");
+
+    // export-pov's printed command lines use every core, as render does.
+    let cores = std::thread::available_parallelism().unwrap().get();
+    let pov = t.path("pov");
+    let o = run(&[
+        "export-pov",
+        root().join(SPHERE).to_str().unwrap(),
+        pov.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let out = String::from_utf8_lossy(&o.stdout);
+    assert!(out.contains(&format!("Work_Threads={cores}")), "{out}");
+    let window = out.lines().find(|l| l.contains("window")).unwrap();
+    let wide = window.split("window ").nth(1).unwrap();
+    assert!(wide.split(' ').next().unwrap().len() <= 9, "{window}");
+
+    // compare --scene of a photograph backdrop says why there are no squares.
+    let hits = t.path("h.exr");
+    let o = run(&[
+        "render",
+        root().join(SPHERE).to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--hits",
+        hits.to_str().unwrap(),
+        "--set",
+        "image.width=8",
+        "--set",
+        "image.height=8",
+        "-q",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let h = hits.to_str().unwrap();
+    let photo = root().join("scenes/sphere-photo.toml");
+    let o = run(&["compare", h, h, "--scene", photo.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).starts_with("note: ") && stderr(&o).contains("photograph"),
+        "{}",
+        stderr(&o)
+    );
 }
 
 /// Volumes with an axis of one or two samples (no cells, or one layer of

@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Args as ClapArgs;
 
 use snell::classify::{self, Method};
-use snell::filter::{Field, FilterKind};
+use snell::filter::Field;
 use snell::lattice::Lattice;
 
 use super::common::VolumeArgs;
@@ -17,16 +17,23 @@ use super::common::VolumeArgs;
 pub struct Args {
     /// Volume file.
     pub volume: PathBuf,
-    /// Reconstruction filter.
+    /// Reconstruction filter: linear, catmull-rom, bspline2..bspline7, smooth-bspline3.
     #[arg(long)]
     pub filter: String,
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub lambda: f64,
+    /// Smoothing weight λ of smooth-bspline3, 0 to 1e12 (required by it, refused by the other filters).
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub lambda: Option<f64>,
     /// Iso-value (in the volume's units).
     #[arg(long, allow_negative_numbers = true)]
     pub iso: f64,
-    /// Methods to run, comma-separated (default: all).
-    #[arg(long, value_delimiter = ',')]
+    /// Methods to run, comma-separated (default: all but bezier1 and
+    /// bezier3): bmcc (binary morphology), accc (the paper's weight-extreme
+    /// bound), accc2/accc4/accc8 (ACCC per 2³/4³/8³ sub-cells), bezier0
+    /// (the cell's Bézier hull, no subdivision), bezier = bezier2 (the hull
+    /// refined by 2 levels of de Casteljau subdivision; renders use it),
+    /// bezier1, bezier3, exact (proven crossings only: the lower bound the
+    /// others are measured against).
+    #[arg(long, value_delimiter = ',', value_name = "M1,M2,...")]
     pub methods: Vec<String>,
     /// Print one JSON object instead of a table.
     #[arg(long)]
@@ -36,14 +43,21 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let kind = FilterKind::parse(&a.filter, a.lambda).context("--filter")?;
+    let kind = super::common::filter_kind(&a.filter, a.lambda)?;
     anyhow::ensure!(a.iso.is_finite(), "--iso must be finite");
     let methods: Vec<Method> = if a.methods.is_empty() {
         Method::all().to_vec()
     } else {
         a.methods
             .iter()
-            .map(|m| Method::parse(m).with_context(|| format!("--methods: unknown method '{m}'")))
+            .map(|m| {
+                Method::parse(m).with_context(|| {
+                    format!(
+                        "--methods: unknown method '{m}' (expected {})",
+                        Method::NAMES
+                    )
+                })
+            })
             .collect::<anyhow::Result<_>>()?
     };
     let vol = a.vol.load(&a.volume)?;

@@ -5,32 +5,68 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Args;
 
+use snell::filter::{FilterError, FilterKind};
 use snell::volume::{self, Endian, LoadOptions, RawSpec, SampleType, Volume, limits};
 
 /// How to read a volume file (raw files need their layout spelled out).
 #[derive(Args, Debug, Clone, Default)]
 pub struct VolumeArgs {
     /// Dimensions of a headerless raw file: X,Y,Z.
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub dims: Option<String>,
     /// Sample type of a raw file: u8, i8, u16, i16, u32, i32, f32, f64.
     #[arg(long = "type", value_name = "TYPE")]
     pub sample_type: Option<String>,
-    /// Byte order of a raw file.
-    #[arg(long, default_value = "little", value_name = "little|big")]
-    pub endian: String,
+    /// Byte order of a raw file (default: little).
+    #[arg(long, value_name = "little|big")]
+    pub endian: Option<String>,
     /// Voxel spacing X,Y,Z (overrides the file's own).
-    #[arg(long, value_name = "X,Y,Z")]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub spacing: Option<String>,
-    /// Bytes to skip at the start of a raw file.
-    #[arg(long, default_value_t = 0)]
-    pub offset: u64,
+    /// Bytes to skip at the start of a raw file (default: 0).
+    #[arg(long, value_name = "BYTES", allow_hyphen_values = true, value_parser = byte_offset)]
+    pub offset: Option<u64>,
     /// Replace NaN/infinite samples in float data instead of rejecting the file.
     #[arg(long)]
     pub allow_nan: bool,
-    /// Largest working set to allow, e.g. 8G (default: 80% of available memory).
-    #[arg(long, value_name = "BYTES")]
+    /// Largest working set to allow: bytes (1e9), or K, M, G, T with an
+    /// optional B or iB (binary multiples: 1G = 1GB = 1GiB = 2^30 bytes);
+    /// default: SNELL_MEMORY_LIMIT, else 80% of available memory.
+    #[arg(long, value_name = "BYTES", allow_hyphen_values = true)]
     pub memory_limit: Option<String>,
+}
+
+/// `--offset`: a whole number of bytes.
+fn byte_offset(s: &str) -> Result<u64, String> {
+    s.trim().parse().map_err(|_| {
+        format!(
+            "expected a whole number of bytes from 0 to {}, got '{s}'",
+            u64::MAX
+        )
+    })
+}
+
+/// The volume formats known by their file names; anything else is read as
+/// headerless raw (with `--dims` and `--type`).
+fn named_format(path: &Path) -> Option<&'static str> {
+    let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
+    if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+        Some("a NRRD file")
+    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+        Some("a NIfTI-1 file")
+    } else {
+        None
+    }
+}
+
+/// `--memory-limit`, or the default limit.
+pub fn memory_limit(arg: Option<&str>) -> anyhow::Result<u64> {
+    Ok(match arg {
+        Some(s) => limits::parse_bytes(s).with_context(|| {
+            format!("--memory-limit: '{s}' is not a size like 512M, 2GB, 1.5GiB or 1e9")
+        })?,
+        None => limits::default_memory_limit(),
+    })
 }
 
 /// Parses `a,b,c` into three values.
@@ -53,17 +89,46 @@ pub fn triple<T: std::str::FromStr>(s: &str, what: &str) -> anyhow::Result<[T; 3
 }
 
 impl VolumeArgs {
-    pub fn load_options(&self) -> anyhow::Result<LoadOptions> {
-        let memory_limit = match &self.memory_limit {
-            Some(s) => limits::parse_bytes(s)
-                .with_context(|| format!("--memory-limit: '{s}' is not a size like 512M or 8G"))?,
-            None => limits::default_memory_limit(),
-        };
+    /// The options for reading `path`. The raw layout options are refused
+    /// for a file whose name says its format (its header gives its layout).
+    pub fn load_options(&self, path: &Path) -> anyhow::Result<LoadOptions> {
+        let memory_limit = memory_limit(self.memory_limit.as_deref())?;
+        if let Some(format) = named_format(path) {
+            let given: Vec<&str> = [
+                ("--dims", self.dims.is_some()),
+                ("--type", self.sample_type.is_some()),
+                ("--endian", self.endian.is_some()),
+                ("--offset", self.offset.is_some()),
+            ]
+            .into_iter()
+            .filter_map(|(flag, on)| on.then_some(flag))
+            .collect();
+            if !given.is_empty() {
+                bail!(
+                    "{}: {} {} only to headerless raw volumes (named .raw or without a known extension); this is {format}, whose header gives its layout",
+                    path.display(),
+                    given.join(", "),
+                    if given.len() == 1 { "applies" } else { "apply" }
+                );
+            }
+        }
         let spacing = match &self.spacing {
-            Some(s) => Some(triple::<f64>(s, "--spacing")?),
+            Some(s) => {
+                let sp = triple::<f64>(s, "--spacing")?;
+                if !sp.iter().all(|x| x.is_finite() && *x > 0.0) {
+                    bail!(
+                        "{}: --spacing {s}: each value must be a finite number > 0",
+                        path.display()
+                    );
+                }
+                Some(sp)
+            }
             None => None,
         };
         let raw = match (&self.dims, &self.sample_type) {
+            (None, None) if self.endian.is_some() || self.offset.is_some() => {
+                bail!("a raw volume needs --dims and --type besides --endian and --offset")
+            }
             (None, None) => None,
             (Some(d), Some(t)) => Some(RawSpec {
                 dims: triple::<usize>(d, "--dims")?,
@@ -72,11 +137,13 @@ impl VolumeArgs {
                         "--type: unknown sample type '{t}' (u8, i8, u16, i16, u32, i32, f32, f64)"
                     )
                 })?,
-                endian: Endian::parse(&self.endian).with_context(|| {
-                    format!("--endian: expected little or big, got '{}'", self.endian)
-                })?,
+                endian: match &self.endian {
+                    None => Endian::Little,
+                    Some(e) => Endian::parse(e)
+                        .with_context(|| format!("--endian: expected little or big, got '{e}'"))?,
+                },
                 spacing: spacing.unwrap_or([1.0; 3]),
-                offset: self.offset,
+                offset: self.offset.unwrap_or(0),
             }),
             _ => bail!("a raw volume needs both --dims and --type"),
         };
@@ -88,7 +155,7 @@ impl VolumeArgs {
     }
 
     pub fn load(&self, path: &Path) -> anyhow::Result<Volume> {
-        self.load_with(path, &self.load_options()?)
+        self.load_with(path, &self.load_options(path)?)
     }
 
     /// [`VolumeArgs::load`] with options already taken from the arguments.
@@ -105,10 +172,33 @@ impl VolumeArgs {
             );
         }
         if let Some(s) = &self.spacing {
-            vol.set_spacing(triple::<f64>(s, "--spacing")?)?;
+            vol.set_spacing(triple::<f64>(s, "--spacing")?)
+                .with_context(|| format!("{}: --spacing {s}", path.display()))?;
         }
         Ok(vol)
     }
+}
+
+/// `--filter NAME [--lambda L]`: the filter, with errors naming the option
+/// at fault. `--lambda` with a filter that does not smooth is refused, as is
+/// `smooth-bspline3` without it.
+pub fn filter_kind(filter: &str, lambda: Option<f64>) -> anyhow::Result<FilterKind> {
+    let kind = FilterKind::with_lambda(filter, lambda).map_err(|e| match e {
+        FilterError::Unknown(_) => anyhow::anyhow!("--filter: {e}"),
+        FilterError::BadLambda(_) => anyhow::anyhow!("--lambda: {e}"),
+        FilterError::NeedsLambda => anyhow::anyhow!(
+            "--filter smooth-bspline3 needs --lambda L, its smoothing weight (0 to 1e12; 1 smooths away u8 rounding noise, 0 is bspline3)"
+        ),
+    })?;
+    if let Some(l) = lambda
+        && !kind.smooths()
+    {
+        bail!(
+            "--lambda {l} applies only to --filter smooth-bspline3, not to --filter {}: drop --lambda or choose the smoothing spline",
+            kind.name()
+        );
+    }
+    Ok(kind)
 }
 
 /// Most worker threads a command starts: far above any core count snell

@@ -18,8 +18,8 @@ pub struct Args {
     pub a: PathBuf,
     /// Reference to compare against (e.g. from `snell reference`, or a 16×16 supersampled render).
     pub b: PathBuf,
-    /// Checker square size, to report hit errors in squares.
-    #[arg(long)]
+    /// Checker square size, to report hit errors in squares (> 0).
+    #[arg(long, allow_negative_numbers = true)]
     pub checker: Option<f64>,
     /// Take the checker size from this scene file.
     #[arg(long)]
@@ -69,7 +69,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
         let checker = match (&a.checker, &a.scene) {
             (Some(c), _) => Some(*c),
-            (None, Some(s)) => Scene::load(s, &[])?.checker_size(),
+            (None, Some(s)) => {
+                let size = Scene::load(s, &[])?.checker_size();
+                if size.is_none() {
+                    eprintln!(
+                        "note: {}: its backdrop is a photograph, not a checkerboard: hit errors are in backdrop units only, without checker squares",
+                        s.display()
+                    );
+                }
+                size
+            }
             (None, None) => None,
         };
         if let Some(c) = checker {

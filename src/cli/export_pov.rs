@@ -6,6 +6,7 @@ use std::path::PathBuf;
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 
+use snell::human::{exact, num};
 use snell::peer::povray::{self, PovOptions, Variant};
 use snell::peer::{Interpolation, PeerError};
 use snell::scene::Scene;
@@ -31,9 +32,10 @@ pub struct Args {
     /// Use this max_gradient instead of the bound computed from the data.
     #[arg(long, value_name = "G")]
     pub max_gradient: Option<f64>,
-    /// Threads for the printed command lines and for --run, 1 to 1024.
-    #[arg(long, default_value_t = 2, value_parser = super::common::thread_count)]
-    pub threads: usize,
+    /// Threads for the printed command lines and for --run, 1 to 1024
+    /// (default: all cores, as `render`).
+    #[arg(long, value_parser = super::common::thread_count)]
+    pub threads: Option<usize>,
     /// Also run POV-Ray (colour and hit renders) and report its times.
     #[arg(long)]
     pub run: bool,
@@ -47,9 +49,9 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let scene = Scene::load(&a.scene, &a.set)?;
-    if a.threads == 0 {
-        bail!("--threads must be at least 1");
-    }
+    let threads = a
+        .threads
+        .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     if (a.hits.is_some() || a.json) && !a.run {
         bail!("--hits and --json need --run");
     }
@@ -108,8 +110,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             m.dims[0],
             m.dims[1],
             m.dims[2],
-            m.lo,
-            m.scale,
+            exact(m.lo),
+            exact(m.scale),
             if m.exact { " (exact)" } else { "" }
         );
         println!(
@@ -131,20 +133,20 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!(
             "hits.png decodes as k = B - 1 (B = 0: no hit), u = {} + (k / 256 + R/65535) * {t}, \
              v = {} + (k % 256 + G/65535) * {t} (resolution {:.3e} backdrop units, window {} wide)",
-            e.u0,
-            e.v0,
+            exact(e.u0),
+            exact(e.v0),
             e.resolution(),
-            e.window(),
+            num(e.window()),
             t = e.tile
         );
-        println!("colour: {}", ex.command_line(Variant::Color, a.threads));
-        println!("hits:   {}", ex.command_line(Variant::Hits, a.threads));
+        println!("colour: {}", ex.command_line(Variant::Color, threads));
+        println!("hits:   {}", ex.command_line(Variant::Hits, threads));
     }
     if !a.run {
         return Ok(());
     }
-    let color = povray::render(&ex, Variant::Color, a.threads)?;
-    let hits_run = povray::render(&ex, Variant::Hits, a.threads)?;
+    let color = povray::render(&ex, Variant::Color, threads)?;
+    let hits_run = povray::render(&ex, Variant::Hits, threads)?;
     let hits = povray::decode_hits(&hits_run.png, &ex.encoding)?;
     if let Some(h) = &a.hits {
         hits.write_exr(h)?;

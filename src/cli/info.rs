@@ -3,6 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
+use snell::human::{num, triple as num3};
 
 use super::common::VolumeArgs;
 
@@ -48,13 +49,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         vol.len()
     );
     println!("  type     {}", vol.native_type());
-    println!("  spacing  {} x {} x {}", sp[0], sp[1], sp[2]);
-    let e = vol.extent();
+    println!("  spacing  {}", num3(sp));
+    println!("  extent   {} (world units)", num3(vol.extent()));
     println!(
-        "  extent   {:.4} x {:.4} x {:.4} (world units)",
-        e[0], e[1], e[2]
+        "  range    {} .. {}  (mean {})",
+        num(st.min),
+        num(st.max),
+        num(st.mean)
     );
-    println!("  range    {} .. {}  (mean {:.4})", st.min, st.max, st.mean);
     println!("  histogram (log scale):");
     let h = &st.histogram;
     let maxlog = h
@@ -70,9 +72,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         } else {
             0
         };
-        println!("    {:>12.4} {:>10} {}", lo, c, "#".repeat(bar));
+        println!("    {:>12} {:>10} {}", num(lo), c, "#".repeat(bar));
     }
-    let iso: Vec<String> = st.suggested_iso.iter().map(|v| format!("{v:.4}")).collect();
+    let iso: Vec<String> = st.suggested_iso.iter().map(|&v| num(v)).collect();
     println!("  iso-values worth trying: {}", iso.join(", "));
     Ok(())
 }

@@ -5,7 +5,9 @@ use std::path::PathBuf;
 use anyhow::Context;
 use clap::{Args as ClapArgs, Subcommand};
 
-use snell::phantom::{Hole, MarschnerLobbSpec, PhantomFormat, SphereSpec};
+use snell::phantom::{
+    Hole, MAX_PHANTOM_SIZE, MarschnerLobbSpec, PhantomError, PhantomFormat, SphereSpec,
+};
 use snell::volume::nrrd;
 
 use super::common::{check_format, check_output, triple};
@@ -32,8 +34,9 @@ pub struct Output {
     /// Sample format: f32 (0..1), u8 (round 255·v) or u16 (round 65535·v).
     #[arg(long, default_value = "f32")]
     pub format: String,
-    /// Standard deviation of added Gaussian noise, in output units.
-    #[arg(long, default_value_t = 0.0)]
+    /// Standard deviation of added Gaussian noise, in output units (255 for
+    /// u8 is full scale), >= 0.
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub noise: f64,
     /// Noise seed.
     #[arg(long, default_value_t = 0)]
@@ -45,18 +48,25 @@ pub struct Output {
 
 #[derive(ClapArgs, Debug)]
 pub struct SphereArgs {
-    /// Cube side in samples.
-    #[arg(long, default_value_t = 64)]
+    /// Cube side in samples, 1 to 4096.
+    #[arg(long, default_value_t = 64, value_parser = phantom_size)]
     pub size: usize,
-    #[arg(long, default_value_t = 20.0)]
+    /// Radius of the solid core (value 1) in samples (grid units), >= 0.
+    #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
     pub radius: f64,
-    #[arg(long, default_value_t = 3.0)]
+    /// Standard deviation of the Gaussian fringe beyond the core, in
+    /// samples (grid units), >= 0; 0 makes a hard edge.
+    #[arg(long, default_value_t = 3.0, allow_negative_numbers = true)]
     pub sigma: f64,
     /// Centre X,Y,Z in grid coordinates (default: the cube's centre).
-    #[arg(long)]
+    #[arg(long, value_name = "X,Y,Z", allow_hyphen_values = true)]
     pub center: Option<String>,
-    /// An air hole CX,CY,CZ,RADIUS,SIGMA (repeatable).
-    #[arg(long = "hole", value_name = "CX,CY,CZ,R,SIGMA")]
+    /// An air hole CX,CY,CZ,RADIUS,SIGMA in grid units (repeatable).
+    #[arg(
+        long = "hole",
+        value_name = "CX,CY,CZ,R,SIGMA",
+        allow_hyphen_values = true
+    )]
     pub holes: Vec<String>,
     #[command(flatten)]
     pub out: Output,
@@ -64,14 +74,47 @@ pub struct SphereArgs {
 
 #[derive(ClapArgs, Debug)]
 pub struct MlArgs {
-    #[arg(long, default_value_t = 41)]
+    /// Cube side in samples over [-1, 1]³, 1 to 4096 (41 is the original
+    /// paper's lattice).
+    #[arg(long, default_value_t = 41, value_parser = phantom_size)]
     pub size: usize,
-    #[arg(long, default_value_t = 0.25)]
+    /// The signal's α: the amplitude of the radial ripple against the
+    /// slope along z, (1 − sin(πz/2) + α(1 + ρ(r))) / (2(1 + α)) (finite;
+    /// Marschner & Lobb use 0.25).
+    #[arg(long, default_value_t = 0.25, allow_negative_numbers = true)]
     pub alpha: f64,
-    #[arg(long, default_value_t = 6.0)]
+    /// The frequency f_M of the radial ripple ρ(r) = cos(2π f_M cos(πr/2))
+    /// (finite; Marschner & Lobb use 6).
+    #[arg(long, default_value_t = 6.0, allow_negative_numbers = true)]
     pub fm: f64,
     #[command(flatten)]
     pub out: Output,
+}
+
+/// `--size`: a side from 1 to [`MAX_PHANTOM_SIZE`] samples.
+fn phantom_size(s: &str) -> Result<usize, String> {
+    let n: usize = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("expected a whole number from 1 to {MAX_PHANTOM_SIZE}, got '{s}'"))?;
+    if (1..=MAX_PHANTOM_SIZE).contains(&n) {
+        Ok(n)
+    } else {
+        Err(format!(
+            "must be from 1 to {MAX_PHANTOM_SIZE} samples, got {n}"
+        ))
+    }
+}
+
+/// A phantom's error with its setting named as the option that sets it.
+fn option_error(e: PhantomError) -> anyhow::Error {
+    match e {
+        PhantomError::Setting { key, msg } => {
+            let flag = if key == "holes" { "hole" } else { key };
+            anyhow::anyhow!("--{flag}: {msg}")
+        }
+        e => e.into(),
+    }
 }
 
 fn format(s: &str) -> anyhow::Result<PhantomFormat> {
@@ -114,7 +157,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             };
             check_output(&s.out.output)?;
             check_format(&s.out.output, "-o", &["nrrd"])?;
-            (spec.build()?, s.out)
+            (spec.build().map_err(option_error)?, s.out)
         }
         Kind::MarschnerLobb(m) => {
             let spec = MarschnerLobbSpec {
@@ -127,7 +170,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             };
             check_output(&m.out.output)?;
             check_format(&m.out.output, "-o", &["nrrd"])?;
-            (spec.build()?, m.out)
+            (spec.build().map_err(option_error)?, m.out)
         }
     };
     let enc = if out.gzip {

@@ -51,9 +51,11 @@ pub struct Args {
     /// are bitwise those of a whole-frame render.
     #[arg(long, value_name = "X0,Y0,X1,Y1")]
     pub region: Option<String>,
-    /// Largest working set to allow, e.g. 8G or 1.5G (default: the
-    /// SNELL_MEMORY_LIMIT variable, else 80% of available memory).
-    #[arg(long, value_name = "BYTES")]
+    /// Largest working set to allow: bytes (1e9), or K, M, G, T with an
+    /// optional B or iB (binary multiples: 1G = 1GB = 1GiB = 2^30 bytes), e.g.
+    /// 8G or 1.5GiB (default: the SNELL_MEMORY_LIMIT variable, else 80% of
+    /// available memory).
+    #[arg(long, value_name = "BYTES", allow_hyphen_values = true)]
     pub memory_limit: Option<String>,
     /// Do not print the stats table.
     #[arg(short, long)]
@@ -62,14 +64,16 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some(s) = &a.memory_limit {
-        snell::volume::limits::parse_bytes(s)
-            .with_context(|| format!("--memory-limit: '{s}' is not a size like 512M or 8G"))?;
+        super::common::memory_limit(Some(s))?;
         // Every limit check of the scene, its volume and its image reads the
         // variable, so the flag sets it for them all.
         // SAFETY: at start-up, before this process starts any other thread.
         unsafe { std::env::set_var("SNELL_MEMORY_LIMIT", s) };
     }
     let scene = Scene::load(&a.scene, &a.set)?;
+    for w in scene.ignored_settings() {
+        eprintln!("warning: {}: {w}", a.scene.display());
+    }
     let outputs = given(&[
         Some(&a.output),
         a.hits.as_ref(),

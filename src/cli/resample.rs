@@ -7,7 +7,6 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args as ClapArgs;
 
-use snell::filter::FilterKind;
 use snell::filter::resample::resample;
 use snell::volume::{SampleType, nrrd};
 
@@ -26,9 +25,9 @@ pub struct Args {
     /// Reconstruction filter: linear, catmull-rom, bspline2..bspline7, smooth-bspline3.
     #[arg(long, default_value = "bspline3")]
     pub filter: String,
-    /// Smoothing of smooth-bspline3 (λ >= 0).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub lambda: f64,
+    /// Smoothing weight λ of smooth-bspline3, 0 to 1e12 (required by it, refused by the other filters).
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub lambda: Option<f64>,
     /// Sample type written: u8, i8, u16, i16, u32, i32, f32 (integers rounded and clamped; default: the input's, f64 as f32).
     #[arg(long)]
     pub format: Option<String>,
@@ -40,7 +39,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let kind = FilterKind::parse(&a.filter, a.lambda).context("--filter")?;
+    let kind = super::common::filter_kind(&a.filter, a.lambda)?;
     let size = triple::<usize>(&a.size, "--size")?;
     let ty = match &a.format {
         None => None,
@@ -55,7 +54,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     check_output(&a.output)?;
     check_format(&a.output, "-o", &["nrrd"])?;
     check_distinct(&[&a.output], &[&a.volume])?;
-    let opts = a.vol.load_options()?;
+    let opts = a.vol.load_options(&a.volume)?;
     let vol = a.vol.load_with(&a.volume, &opts)?;
     let ty = ty.unwrap_or(match vol.native_type() {
         SampleType::F64 => SampleType::F32,

@@ -7,7 +7,8 @@ use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 use glam::DVec3;
 
-use snell::filter::{Field, FilterKind};
+use snell::filter::Field;
+use snell::human::exact;
 
 use super::common::VolumeArgs;
 
@@ -18,22 +19,50 @@ pub struct Args {
     /// Reconstruction filter: linear, catmull-rom, bspline2..bspline7, smooth-bspline3.
     #[arg(long)]
     pub filter: String,
-    /// Smoothing of smooth-bspline3 (λ >= 0).
-    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
-    pub lambda: f64,
-    /// File of points, one `x,y,z` per line in grid coordinates (`-` for stdin).
+    /// Smoothing weight λ of smooth-bspline3, 0 to 1e12 (required by it, refused by the other filters).
+    #[arg(long, allow_negative_numbers = true, value_name = "L")]
+    pub lambda: Option<f64>,
+    /// File of points, one `x,y,z` per line in grid coordinates (`-` for
+    /// stdin); blank lines, `#` comments and a first line of column names
+    /// (`x,y,z`, as this command writes) are skipped.
     #[arg(long)]
     pub points: PathBuf,
     #[command(flatten)]
     pub vol: VolumeArgs,
 }
 
+/// The number of columns if `t` is a header line naming them (`x,y,z`,
+/// or the `x,y,z,value,gx,gy,gz` header `snell sample` writes): words, no
+/// numbers, the first three x, y and z.
+fn header_columns(t: &str) -> Option<usize> {
+    let fields: Vec<&str> = t
+        .split([',', ' ', '\t'])
+        .filter(|s| !s.is_empty())
+        .collect();
+    let xyz = fields.len() >= 3
+        && fields[..3]
+            .iter()
+            .zip(["x", "y", "z"])
+            .all(|(f, n)| f.eq_ignore_ascii_case(n));
+    (xyz && fields.iter().all(|f| f.parse::<f64>().is_err())).then_some(fields.len())
+}
+
 fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> {
     let mut out = Vec::new();
+    let mut first = true;
+    // Numbers per row: three, or as many as a header names (the point is
+    // the first three: this command's output reads back as its points).
+    let mut columns = 3;
     for (n, line) in reader.lines().enumerate() {
         let line = line.with_context(|| format!("{name}: read error at line {}", n + 1))?;
         let t = line.trim();
         if t.is_empty() || t.starts_with('#') {
+            continue;
+        }
+        if std::mem::take(&mut first)
+            && let Some(c) = header_columns(t)
+        {
+            columns = c;
             continue;
         }
         let parts: Vec<&str> = t
@@ -42,15 +71,22 @@ fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> 
             .collect();
         let vals: Option<Vec<f64>> = parts.iter().map(|p| p.parse::<f64>().ok()).collect();
         match vals {
-            Some(v) if v.len() == 3 && v.iter().all(|x| x.is_finite()) => {
+            Some(v)
+                if (v.len() == 3 || v.len() == columns) && v[..3].iter().all(|x| x.is_finite()) =>
+            {
                 out.push(DVec3::new(v[0], v[1], v[2]))
             }
             _ => {
                 // A line of megabytes quoted whole would bury the message.
                 let shown: String = t.chars().take(80).collect();
                 let more = if shown.len() < t.len() { "…" } else { "" };
+                let what = if columns == 3 {
+                    "three finite numbers x,y,z".to_string()
+                } else {
+                    format!("three finite numbers x,y,z (or {columns}, as the header names)")
+                };
                 bail!(
-                    "{name}: line {}: expected three finite numbers x,y,z, got '{shown}{more}'",
+                    "{name}: line {}: expected {what}, got '{shown}{more}'",
                     n + 1
                 )
             }
@@ -60,7 +96,7 @@ fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> 
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let kind = FilterKind::parse(&a.filter, a.lambda).context("--filter")?;
+    let kind = super::common::filter_kind(&a.filter, a.lambda)?;
     let name = a.points.display().to_string();
     let points = if name == "-" {
         parse_points(std::io::stdin().lock(), "stdin")?
@@ -75,8 +111,48 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     writeln!(out, "x,y,z,value,gx,gy,gz")?;
     for p in points {
         let (v, g) = field.value_grad(p);
-        writeln!(out, "{},{},{},{},{},{},{}", p.x, p.y, p.z, v, g.x, g.y, g.z)?;
+        // The shortest round trip of each value, in scientific notation at
+        // the extremes (a gradient of 1e-15 is 22 characters positionally).
+        let row = [p.x, p.y, p.z, v, g.x, g.y, g.z].map(exact);
+        writeln!(out, "{}", row.join(","))?;
     }
     out.flush()?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A header on the first line (this command's own) is skipped, and the
+    /// line numbers of errors count every line of the file from 1.
+    #[test]
+    fn points_skip_a_header_and_number_lines_from_one() {
+        let p = parse_points("x,y,z,value,gx,gy,gz\n1,2,3\n".as_bytes(), "p").unwrap();
+        assert_eq!(p, vec![DVec3::new(1.0, 2.0, 3.0)]);
+        let p = parse_points("# points\nx y z\n1 2 3\n".as_bytes(), "p").unwrap();
+        assert_eq!(p.len(), 1);
+        // This command's output, gradient and all, reads back as its points.
+        let p = parse_points(
+            "x,y,z,value,gx,gy,gz\n1,2,3,0.5,1e-15,0,-2\n".as_bytes(),
+            "p",
+        )
+        .unwrap();
+        assert_eq!(p, vec![DVec3::new(1.0, 2.0, 3.0)]);
+        let e = parse_points("x,y,z,value\n1,2\n".as_bytes(), "p")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("line 2: expected three") && e.contains("or 4"),
+            "{e}"
+        );
+        let e = parse_points("1,2,3\nx,y,z\n".as_bytes(), "p")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2") && e.contains("x,y,z"), "{e}");
+        let e = parse_points("x,y,z\n4,5\n".as_bytes(), "p")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 2:"), "{e}");
+    }
 }

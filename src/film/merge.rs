@@ -138,8 +138,10 @@ pub fn merge(parts: &[Part], memory_limit: u64) -> Result<Merged, MergeError> {
         let theirs: Vec<&str> = p.channels.iter().map(|c| c.0.as_str()).collect();
         if theirs != names {
             return Err(bad(format!(
-                "has channels {theirs:?}, {} has {names:?}",
-                first.path.display()
+                "has channels {}, {} has {}",
+                theirs.join(", "),
+                first.path.display(),
+                names.join(", ")
             )));
         }
     }
@@ -293,5 +295,14 @@ mod tests {
         let e = merge(&parts, 10).unwrap_err().to_string();
         assert!(e.contains("over the memory limit"), "{e}");
         assert!(matches!(merge(&[], 1), Err(MergeError::NoParts)));
+        // Channel lists in words, not Rust's debug form.
+        let mut rgb = part("f", [2, 0], 3, 1, full);
+        rgb.channels = ["B", "G", "R"]
+            .map(|c| (c.to_string(), vec![0.0; 3]))
+            .to_vec();
+        let e = merge(&[parts[0].clone(), rgb], u64::MAX)
+            .unwrap_err()
+            .to_string();
+        assert_eq!(e, "f: has channels B, G, R, a has v");
     }
 }

@@ -56,8 +56,15 @@ pub enum FilterError {
         "unknown filter '{0}' (expected one of: linear, catmull-rom, bspline2 .. bspline7, smooth-bspline3)"
     )]
     Unknown(String),
-    #[error("lambda must be a number from 0 to 1e12, got {0}")]
+    #[error(
+        "the smoothing weight λ must be a number from 0 to 1e12, got {}",
+        crate::human::num(*.0)
+    )]
     BadLambda(f64),
+    #[error(
+        "smooth-bspline3 needs its smoothing weight λ (0 to 1e12; 1 smooths away u8 rounding noise, 0 is bspline3)"
+    )]
+    NeedsLambda,
 }
 
 /// The largest smoothing `λ` accepted. Far below it the smoothing spline is
@@ -101,6 +108,32 @@ impl FilterKind {
             },
         };
         Ok(kind)
+    }
+
+    /// Parses a filter name with its smoothing weight as written: `λ` is
+    /// checked when given, and required by `smooth-bspline3` (there is no
+    /// default weight: 0 would silently be `bspline3`). A `λ` given with a
+    /// filter that does not smooth is not an error here; the caller says
+    /// whether it is ([`FilterKind::smooths`]).
+    pub fn with_lambda(name: &str, lambda: Option<f64>) -> Result<FilterKind, FilterError> {
+        let kind = FilterKind::parse(name, 0.0)?;
+        if let Some(l) = lambda
+            && !(0.0..=MAX_LAMBDA).contains(&l)
+        {
+            return Err(FilterError::BadLambda(l));
+        }
+        match (kind, lambda) {
+            (FilterKind::SmoothBSpline3 { .. }, None) => Err(FilterError::NeedsLambda),
+            (FilterKind::SmoothBSpline3 { .. }, Some(lambda)) => {
+                Ok(FilterKind::SmoothBSpline3 { lambda })
+            }
+            (kind, _) => Ok(kind),
+        }
+    }
+
+    /// Whether the filter has a smoothing weight (`smooth-bspline3`).
+    pub fn smooths(&self) -> bool {
+        matches!(self, FilterKind::SmoothBSpline3 { .. })
     }
 
     /// The SPEC.md name.
@@ -198,5 +231,37 @@ mod tests {
             Err(FilterError::BadLambda(-1.0))
         );
         assert!(FilterKind::parse("linear", f64::NAN).is_err());
+    }
+
+    /// The smoothing spline has no default weight; a weight is checked
+    /// whenever it is given, and unknown names are reported first.
+    #[test]
+    fn with_lambda_requires_and_checks_the_weight() {
+        assert_eq!(
+            FilterKind::with_lambda("smooth-bspline3", None),
+            Err(FilterError::NeedsLambda)
+        );
+        assert_eq!(
+            FilterKind::with_lambda("smooth-bspline3", Some(0.5)),
+            Ok(FilterKind::SmoothBSpline3 { lambda: 0.5 })
+        );
+        assert_eq!(
+            FilterKind::with_lambda("bspline3", Some(-1.0)),
+            Err(FilterError::BadLambda(-1.0))
+        );
+        assert_eq!(
+            FilterKind::with_lambda("bspline3", Some(2.0)),
+            Ok(FilterKind::BSpline(3))
+        );
+        assert_eq!(
+            FilterKind::with_lambda("bspline3", None),
+            Ok(FilterKind::BSpline(3))
+        );
+        assert!(matches!(
+            FilterKind::with_lambda("gauss", Some(-1.0)),
+            Err(FilterError::Unknown(_))
+        ));
+        assert!(FilterKind::SmoothBSpline3 { lambda: 0.0 }.smooths());
+        assert!(!FilterKind::Linear.smooths());
     }
 }

@@ -15,6 +15,37 @@ use crate::volume::{SampleType, Volume};
 pub enum PhantomError {
     #[error("phantom {0}")]
     Invalid(String),
+    /// A setting out of range: its name as in scene files (`size`; the
+    /// option of `snell phantom` is `--size`) and what is wrong.
+    #[error("phantom {key} {msg}")]
+    Setting { key: &'static str, msg: String },
+}
+
+/// Largest phantom side in samples.
+pub const MAX_PHANTOM_SIZE: usize = 4096;
+
+fn setting(key: &'static str, msg: String) -> PhantomError {
+    PhantomError::Setting { key, msg }
+}
+
+fn check_size(size: usize) -> Result<(), PhantomError> {
+    if size == 0 || size > MAX_PHANTOM_SIZE {
+        return Err(setting(
+            "size",
+            format!("must be from 1 to {MAX_PHANTOM_SIZE} samples, got {size}"),
+        ));
+    }
+    Ok(())
+}
+
+fn check_non_negative(key: &'static str, x: f64) -> Result<(), PhantomError> {
+    if !(x.is_finite() && x >= 0.0) {
+        return Err(setting(
+            key,
+            format!("must be a finite number >= 0, got {x}"),
+        ));
+    }
+    Ok(())
 }
 
 /// Sample encoding of a phantom.
@@ -197,36 +228,15 @@ impl SphereSpec {
     }
 
     pub fn validate(&self) -> Result<(), PhantomError> {
-        if self.size == 0 || self.size > 4096 {
-            return Err(PhantomError::Invalid(format!(
-                "size {} must be in 1..=4096",
-                self.size
-            )));
-        }
+        check_size(self.size)?;
         let finite = |x: f64| x.is_finite();
-        if !finite(self.radius) || self.radius < 0.0 {
-            return Err(PhantomError::Invalid(format!(
-                "radius {} must be a finite number >= 0",
-                self.radius
-            )));
-        }
-        if !finite(self.sigma) || self.sigma < 0.0 {
-            return Err(PhantomError::Invalid(format!(
-                "sigma {} must be a finite number >= 0",
-                self.sigma
-            )));
-        }
-        if !finite(self.noise) || self.noise < 0.0 {
-            return Err(PhantomError::Invalid(format!(
-                "noise {} must be a finite number >= 0",
-                self.noise
-            )));
-        }
-        if self
-            .center
-            .is_some_and(|c| !c.iter().all(|v| v.is_finite()))
+        check_non_negative("radius", self.radius)?;
+        check_non_negative("sigma", self.sigma)?;
+        check_non_negative("noise", self.noise)?;
+        if let Some(c) = self.center
+            && !c.iter().all(|v| v.is_finite())
         {
-            return Err(PhantomError::Invalid("center must be finite".into()));
+            return Err(setting("center", format!("must be finite, got {c:?}")));
         }
         for h in &self.holes {
             if !h.center.iter().all(|v| v.is_finite())
@@ -235,10 +245,13 @@ impl SphereSpec {
                 || !finite(h.sigma)
                 || h.sigma < 0.0
             {
-                return Err(PhantomError::Invalid(format!(
-                    "hole at [{}, {}, {}] with radius {} and sigma {} needs a finite center, radius >= 0 and sigma >= 0",
-                    h.center[0], h.center[1], h.center[2], h.radius, h.sigma
-                )));
+                return Err(setting(
+                    "holes",
+                    format!(
+                        "hole at [{}, {}, {}] with radius {} and sigma {} needs a finite center, radius >= 0 and sigma >= 0",
+                        h.center[0], h.center[1], h.center[2], h.radius, h.sigma
+                    ),
+                ));
             }
         }
         Ok(())
@@ -323,22 +336,13 @@ impl MarschnerLobbSpec {
     }
 
     pub fn validate(&self) -> Result<(), PhantomError> {
-        if self.size == 0 || self.size > 4096 {
-            return Err(PhantomError::Invalid(format!(
-                "size {} must be in 1..=4096",
-                self.size
-            )));
+        check_size(self.size)?;
+        for (key, x) in [("alpha", self.alpha), ("fm", self.fm)] {
+            if !x.is_finite() {
+                return Err(setting(key, format!("must be finite, got {x}")));
+            }
         }
-        if !self.alpha.is_finite()
-            || !self.fm.is_finite()
-            || !self.noise.is_finite()
-            || self.noise < 0.0
-        {
-            return Err(PhantomError::Invalid(
-                "alpha, fm must be finite and noise >= 0".into(),
-            ));
-        }
-        Ok(())
+        check_non_negative("noise", self.noise)
     }
 
     pub fn build(&self) -> Result<Volume, PhantomError> {
@@ -359,6 +363,14 @@ pub enum PhantomSpec {
 }
 
 impl PhantomSpec {
+    /// Checks the settings without building the grid.
+    pub fn validate(&self) -> Result<(), PhantomError> {
+        match self {
+            PhantomSpec::Sphere(s) => s.validate(),
+            PhantomSpec::MarschnerLobb(m) => m.validate(),
+        }
+    }
+
     pub fn build(&self) -> Result<Volume, PhantomError> {
         match self {
             PhantomSpec::Sphere(s) => s.build(),

@@ -33,13 +33,27 @@ pub enum CameraError {
     NoDirection,
     #[error("up is parallel to the viewing direction")]
     UpParallel,
-    #[error("fov_y must be in (0, 180) degrees, got {0}")]
+    #[error("fov_y must be between 0 and 180 degrees (both excluded), got {0}")]
     BadFov(f64),
-    #[error("orthographic height must be > 0, got {0}")]
+    #[error("orthographic height must be a finite number > 0, got {0}")]
     BadHeight(f64),
-    #[error("camera vectors must be finite")]
-    NotFinite,
+    /// A vector (`position`, `look_at`, `up`) with a NaN or infinite component.
+    #[error("{0} must be finite")]
+    NotFinite(&'static str),
+    /// `position` or `look_at` too far from the origin: distances between
+    /// such points square past the `f64` range.
+    #[error(
+        "{what} must lie within ±{MAX_COORD:e} of the origin on each axis (further out the camera's distances overflow), got {value:e}"
+    )]
+    TooFar { what: &'static str, value: f64 },
+    /// The image's corner rays leave the `f64` range (a huge orthographic view).
+    #[error("the view's corners lie beyond the f64 range; use a smaller height")]
+    ViewOverflow,
 }
+
+/// Largest magnitude of a `position` or `look_at` coordinate: their
+/// difference then squares to at most 1.2e301, far inside `f64`.
+pub const MAX_COORD: f64 = 1e150;
 
 impl Camera {
     pub fn new(
@@ -50,14 +64,19 @@ impl Camera {
         width: u32,
         height: u32,
     ) -> Result<Camera, CameraError> {
-        if !(position.is_finite() && look_at.is_finite() && up.is_finite()) {
-            return Err(CameraError::NotFinite);
+        for (what, v) in [("position", position), ("look_at", look_at), ("up", up)] {
+            if !v.is_finite() {
+                return Err(CameraError::NotFinite(what));
+            }
+        }
+        // Finite ends can still be an infinite distance apart (±1e308), or
+        // square to infinity on the way to their distance.
+        for (what, v) in [("position", position), ("look_at", look_at)] {
+            if let Some(&value) = v.to_array().iter().find(|c| c.abs() > MAX_COORD) {
+                return Err(CameraError::TooFar { what, value });
+            }
         }
         let f = look_at - position;
-        // Finite ends can still be an infinite distance apart (±1e308).
-        if !f.length().is_finite() {
-            return Err(CameraError::NotFinite);
-        }
         if f.length() <= 1e-12 * (1.0 + position.length()) {
             return Err(CameraError::NoDirection);
         }
@@ -97,7 +116,7 @@ impl Camera {
         for (x, y) in [(0.0, 0.0), (w, h)] {
             let (o, d) = cam.ray(x, y);
             if !(o.is_finite() && d.is_finite()) {
-                return Err(CameraError::NotFinite);
+                return Err(CameraError::ViewOverflow);
             }
         }
         Ok(cam)
@@ -269,18 +288,37 @@ mod tests {
         ));
         assert_eq!(
             Camera::new(DVec3::NAN, DVec3::Z, DVec3::Y, p, 4, 4),
-            Err(CameraError::NotFinite)
+            Err(CameraError::NotFinite("position"))
         );
         // Finite ends an infinite distance apart; an orthographic view whose
         // corners leave the f64 range.
         assert_eq!(
             Camera::new(DVec3::splat(-1e308), DVec3::splat(1e308), DVec3::Y, p, 4, 4),
-            Err(CameraError::NotFinite)
+            Err(CameraError::TooFar {
+                what: "position",
+                value: -1e308
+            })
+        );
+        // One far coordinate, the others near: the distance squares past
+        // f64 (the review's [31.5, 31.5, -1e307]); named with its limit.
+        let e = Camera::new(
+            DVec3::new(31.5, 31.5, -1e307),
+            DVec3::splat(31.5),
+            DVec3::Y,
+            p,
+            4,
+            4,
+        )
+        .unwrap_err();
+        assert_eq!(
+            e.to_string(),
+            "position must lie within ±1e150 of the origin on each axis (further the camera's distances overflow), got -1e307"
+                .replace("further the", "further out the")
         );
         let wide = Projection::Orthographic { half_height: 1e308 };
         assert_eq!(
-            Camera::new(DVec3::X * 1e308, DVec3::ZERO, DVec3::Y, wide, 4, 4),
-            Err(CameraError::NotFinite)
+            Camera::new(DVec3::X, DVec3::ZERO, DVec3::Y, wide, 8, 4),
+            Err(CameraError::ViewOverflow)
         );
     }
 }

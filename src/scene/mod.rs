@@ -144,7 +144,9 @@ fn default_endian() -> String {
 #[serde(deny_unknown_fields)]
 struct VolumeCfg {
     path: Option<String>,
-    phantom: Option<PhantomSpec>,
+    /// Read as a [`PhantomSpec`] by [`phantom_spec`], whose errors name the
+    /// key inside the table (serde's tagged enums lose the path).
+    phantom: Option<toml::Value>,
     raw: Option<RawCfg>,
     /// Overrides the file's spacing.
     spacing: Option<[f64; 3]>,
@@ -156,8 +158,8 @@ struct VolumeCfg {
 #[serde(deny_unknown_fields)]
 struct SurfaceCfg {
     filter: String,
-    #[serde(default)]
-    lambda: f64,
+    /// The smoothing weight of `smooth-bspline3` (required by it).
+    lambda: Option<f64>,
     iso: f64,
     #[serde(default = "default_ior")]
     ior: f64,
@@ -573,9 +575,24 @@ pub struct Scene {
     /// The photograph the backdrop shows, if any, as a path.
     pub backdrop_image: Option<PathBuf>,
     pub render: RenderSettings,
+    /// Settings the scene file or `--set` wrote that this scene does not
+    /// use, one message each (see [`Scene::ignored_settings`]).
+    ignored: Vec<String>,
 }
 
 impl Scene {
+    /// The settings the user wrote (in the file or with `--set`; defaults
+    /// never count) that have no effect on this scene, each as a message
+    /// naming the key and why: `camera.fov_y`/`camera.height` of the other
+    /// projection, `backdrop.width`/`outside` with a checker and
+    /// `checker_colors` with a photograph, `render.step` with a cell
+    /// traversal, the anti-aliasing settings with `supersampling = "none"`
+    /// (and `footprint` without the footprint mode), and `surface.lambda`
+    /// with a filter that does not smooth.
+    pub fn ignored_settings(&self) -> &[String] {
+        &self.ignored
+    }
+
     /// The files the scene reads: its own, its volume file and its
     /// backdrop photograph (the ones a command must not write over).
     pub fn input_files(&self) -> Vec<&Path> {
@@ -599,26 +616,47 @@ impl Scene {
     }
 
     /// Parses scene text; `path` is used for messages and relative paths.
+    /// An error caused by a `--set` override names that override, not the
+    /// file.
     pub fn parse(text: &str, path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
-        let mut table: toml::Table =
-            text.parse()
-                .map_err(|e: toml::de::Error| SceneError::Syntax {
-                    path: path.to_path_buf(),
-                    msg: e.to_string().trim().replace('\n', " "),
-                })?;
+        let mut table: toml::Table = text
+            .parse()
+            .map_err(|e: toml::de::Error| syntax_error(text, path, &e))?;
         for o in overrides {
             apply_override(&mut table, o)?;
         }
-        let de = toml::Value::Table(table);
-        let file: SceneFile = serde_path_to_error::deserialize(de).map_err(|e| {
-            let key = e.path().to_string();
-            SceneError::Key {
-                path: path.to_path_buf(),
-                key: if key == "." { "scene".into() } else { key },
-                msg: e.into_inner().to_string().trim().replace('\n', " "),
+        let mut written = Vec::new();
+        written_keys(&table, "", &mut written);
+        // A key an override set is named as that override in warnings.
+        for (key, shown) in &mut written {
+            if let Some(o) = overrides.iter().rev().find(|o| {
+                o.split_once('=').is_some_and(|(k, _)| {
+                    k.split('.').map(str::trim).collect::<Vec<_>>().join(".") == *key
+                })
+            }) {
+                *shown = format!("--set {o}");
             }
-        })?;
-        resolve(file, path)
+        }
+        let de = toml::Value::Table(table);
+        let key_error = |key: String, msg: String| SceneError::Key {
+            path: path.to_path_buf(),
+            key,
+            msg,
+        };
+        let result = serde_path_to_error::deserialize(de)
+            .map_err(|e| {
+                let key = e.path().to_string();
+                let key = if key == "." { "scene".into() } else { key };
+                key_error(key, plain_serde_message(&e.into_inner().to_string()))
+            })
+            .and_then(|file: SceneFile| {
+                let phantom = match &file.volume.phantom {
+                    None => None,
+                    Some(v) => Some(phantom_spec(v.clone()).map_err(|(k, m)| key_error(k, m))?),
+                };
+                resolve(file, phantom, path, &written)
+            });
+        result.map_err(|e| blame_override(e, overrides))
     }
 
     /// Loads (or builds) the volume and applies the scene's spacing override.
@@ -634,7 +672,19 @@ impl Scene {
                     raw: raw.clone(),
                     ..opts.clone()
                 };
-                crate::volume::load(path, &opts)?
+                crate::volume::load(path, &opts).map_err(|e| match e {
+                    // The reader's message names the command line's raw
+                    // options; a scene sets them in [volume.raw].
+                    VolumeError::UnknownFormat { path: file } => SceneError::Key {
+                        path: self.path.clone(),
+                        key: "volume.path".into(),
+                        msg: format!(
+                            "{}: unknown volume format (expected .nrrd, .nhdr, .nii or .nii.gz; a headerless raw file needs a [volume.raw] table with dims = [X, Y, Z] and type = \"u16\" (u8, i8, u16, i16, u32, i32, f32, f64), optionally endian = \"big\" and offset = BYTES)",
+                            file.display()
+                        ),
+                    },
+                    e => e.into(),
+                })?
             }
             VolumeSource::Phantom(spec) => {
                 let phantom_error = |msg: String| SceneError::Phantom {
@@ -644,10 +694,21 @@ impl Scene {
                 // Against the caller's limit, before the grid is allocated.
                 crate::volume::checked_sample_count(&self.path, spec.dims(), opts.memory_limit)
                     .map_err(|e| match e {
-                        VolumeError::TooLarge { msg, .. } => phantom_error(msg),
+                        VolumeError::TooLarge { msg, .. } => SceneError::Key {
+                            path: self.path.clone(),
+                            key: "volume.phantom.size".into(),
+                            msg,
+                        },
                         e => phantom_error(e.to_string()),
                     })?;
-                spec.build().map_err(|e| phantom_error(e.to_string()))?
+                spec.build().map_err(|e| match e {
+                    crate::phantom::PhantomError::Setting { key, msg } => SceneError::Key {
+                        path: self.path.clone(),
+                        key: format!("volume.phantom.{key}"),
+                        msg,
+                    },
+                    e => phantom_error(e.to_string()),
+                })?
             }
         };
         if let Some(s) = self.spacing {
@@ -747,7 +808,12 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
     let value = value.trim();
     let parsed: toml::Value = match format!("v = {value}").parse::<toml::Table>() {
         Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.into())),
-        Err(_) => toml::Value::String(value.to_string()),
+        // A number TOML cannot hold is refused as in a file, not taken
+        // for a word.
+        Err(e) => match number_reason(e.message(), value) {
+            Some(msg) => return Err(err(&msg)),
+            None => toml::Value::String(value.to_string()),
+        },
     };
     let mut cur = table;
     for p in &parts[..parts.len() - 1] {
@@ -782,7 +848,388 @@ pub(crate) fn unit_scale(v: DVec3) -> DVec3 {
     if m > 0.0 && m.is_finite() { v / m } else { v }
 }
 
-fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
+/// Reads `[volume.phantom]`: its `kind`, then the kind's settings, each
+/// error with the key inside the table (`volume.phantom.size`).
+fn phantom_spec(v: toml::Value) -> Result<PhantomSpec, (String, String)> {
+    let toml::Value::Table(mut t) = v else {
+        return Err((
+            "volume.phantom".into(),
+            format!(
+                "expected a table of phantom settings, got {}",
+                plain_value(&v)
+            ),
+        ));
+    };
+    let kind = t.remove("kind");
+    fn read<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, (String, String)> {
+        serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
+            let key = e.path().to_string();
+            let key = if key == "." {
+                "volume.phantom".to_string()
+            } else {
+                format!("volume.phantom.{key}")
+            };
+            (key, plain_serde_message(&e.into_inner().to_string()))
+        })
+    }
+    match kind.as_ref().and_then(|k| k.as_str()) {
+        Some("sphere") => Ok(PhantomSpec::Sphere(read(t)?)),
+        Some("marschner-lobb") => Ok(PhantomSpec::MarschnerLobb(read(t)?)),
+        _ => Err((
+            "volume.phantom.kind".into(),
+            match kind {
+                None => "missing: give kind = \"sphere\" or \"marschner-lobb\"".into(),
+                Some(k) => format!(
+                    "expected \"sphere\" or \"marschner-lobb\", got {}",
+                    plain_value(&k)
+                ),
+            },
+        )),
+    }
+}
+
+/// A value as the user wrote it, for messages: `the text "1.5"`, `32.0`,
+/// `a table`, `an array`.
+fn plain_value(v: &toml::Value) -> String {
+    match v {
+        toml::Value::String(s) => format!("the text {s:?}"),
+        toml::Value::Table(_) => "a table".into(),
+        toml::Value::Array(_) => "an array".into(),
+        v => v.to_string(),
+    }
+}
+
+/// serde's messages in plain words: `invalid type: string "1.5", expected
+/// f64` becomes `expected a number, got the text "1.5"`, Rust type names
+/// become ranges (`u32`: a whole number from 0 to 4294967295; TOML's
+/// integers are `i64`, so `u64` and `usize` reach 9223372036854775807) and
+/// the struct names the settings they hold. The `in \`key\`` serde adds is
+/// dropped: the caller names the key.
+pub(crate) fn plain_serde_message(msg: &str) -> String {
+    let msg = msg.trim();
+    let msg = match msg.rfind("\nin `") {
+        Some(i) => &msg[..i],
+        None => msg,
+    };
+    let msg = msg.trim().replace('\n', " ");
+    let expected = |e: &str| -> String {
+        let e = e.trim();
+        match e {
+            "f64" | "f32" => "a number".into(),
+            "u8" => "a whole number from 0 to 255".into(),
+            "u16" => "a whole number from 0 to 65535".into(),
+            "u32" => format!("a whole number from 0 to {}", u32::MAX),
+            "u64" | "usize" => format!("a whole number from 0 to {}", i64::MAX),
+            "i8" | "i16" | "i32" | "i64" | "isize" => "a whole number".into(),
+            "a boolean" => "true or false".into(),
+            "a string" | "string" => "text in quotes".into(),
+            "a sequence" => "an array".into(),
+            _ => {
+                if let Some(n) = e.strip_prefix("an array of length ") {
+                    return format!("an array of {n} values");
+                }
+                if let Some(name) = e.strip_prefix("struct ") {
+                    let what = match name {
+                        "SceneFile" => "scene",
+                        "ImageCfg" => "image",
+                        "CameraCfg" => "camera",
+                        "VolumeCfg" => "volume",
+                        "RawCfg" => "raw volume",
+                        "SurfaceCfg" => "surface",
+                        "BackdropCfg" => "backdrop",
+                        "RenderCfg" => "render",
+                        "SphereSpec" => "sphere phantom",
+                        "MarschnerLobbSpec" => "Marschner-Lobb phantom",
+                        "Hole" => "hole",
+                        other => other,
+                    };
+                    return format!("a table of {what} settings");
+                }
+                e.to_string()
+            }
+        }
+    };
+    let got = |u: &str| -> String {
+        let u = u.trim();
+        let unquote = |s: &str| s.trim_matches('`').to_string();
+        if let Some(s) = u.strip_prefix("string ") {
+            format!("the text {s}")
+        } else if let Some(s) = u
+            .strip_prefix("floating point ")
+            .or_else(|| u.strip_prefix("integer "))
+            .or_else(|| u.strip_prefix("boolean "))
+        {
+            unquote(s)
+        } else {
+            match u {
+                "map" => "a table".into(),
+                "sequence" => "an array".into(),
+                other => other.to_string(),
+            }
+        }
+    };
+    for prefix in ["invalid type: ", "invalid value: "] {
+        if let Some(rest) = msg.strip_prefix(prefix)
+            && let Some((u, e)) = rest.rsplit_once(", expected ")
+        {
+            return format!("expected {}, got {}", expected(e), got(u));
+        }
+    }
+    if let Some(rest) = msg.strip_prefix("invalid length ")
+        && let Some((n, e)) = rest.split_once(", expected ")
+    {
+        return format!("expected {}, got {n}", expected(e));
+    }
+    if let Some(rest) = msg.strip_prefix("missing field ") {
+        return format!("missing key {rest}");
+    }
+    if let Some(rest) = msg.strip_prefix("unknown field ") {
+        return format!("unknown key {rest}");
+    }
+    if let Some(rest) = msg.strip_prefix("unknown variant ")
+        && let Some((got, one_of)) = rest.split_once(", expected one of ")
+    {
+        return format!(
+            "expected one of {}, got \"{}\"",
+            one_of.replace('`', "\""),
+            got.trim_matches('`')
+        );
+    }
+    msg
+}
+
+/// The reason TOML refused a number, in the words both a scene file and a
+/// `--set` value get.
+fn number_reason(reason: &str, text: &str) -> Option<String> {
+    let r = reason.trim();
+    if r.contains("value was too large") || r.contains("value was too small") {
+        Some(if text.starts_with('-') {
+            format!(
+                "whole numbers go down to {} (TOML integers are signed 64-bit), got {text}",
+                i64::MIN
+            )
+        } else {
+            format!(
+                "whole numbers go up to {} (TOML integers are signed 64-bit), got {text}",
+                i64::MAX
+            )
+        })
+    } else if r.contains("floating-point number overflowed") {
+        Some(format!(
+            "numbers must be finite; {text} is beyond the largest 64-bit float (about 1.8e308)"
+        ))
+    } else {
+        None
+    }
+}
+
+/// A scene file TOML refused: a number out of TOML's range is named by its
+/// key (as a `--set` of the same value is); other syntax errors keep TOML's
+/// message on one line.
+fn syntax_error(text: &str, path: &Path, e: &toml::de::Error) -> SceneError {
+    let plain = || SceneError::Syntax {
+        path: path.to_path_buf(),
+        msg: e.to_string().trim().replace('\n', " "),
+    };
+    let Some(span) = e.span() else {
+        return plain();
+    };
+    let Some(value) = text.get(span.clone()) else {
+        return plain();
+    };
+    let Some(reason) = number_reason(e.message(), value.trim()) else {
+        return plain();
+    };
+    // The key: the text before `=` on the value's line, under the last
+    // table header above it.
+    let line_start = text[..span.start].rfind('\n').map_or(0, |i| i + 1);
+    let line = &text[line_start..span.start];
+    let key = line
+        .split('=')
+        .next()
+        .unwrap_or("")
+        .trim()
+        .trim_matches('"');
+    let section = text[..line_start]
+        .lines()
+        .rev()
+        .map(str::trim)
+        .find(|l| l.starts_with('['))
+        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+    let line_no = text[..span.start].matches('\n').count() + 1;
+    SceneError::Key {
+        path: path.to_path_buf(),
+        key: match section {
+            Some(s) if !key.is_empty() => format!("{s}.{key}"),
+            _ if !key.is_empty() => key.to_string(),
+            _ => format!("line {line_no}"),
+        },
+        msg: reason,
+    }
+}
+
+/// An error on a key an override set (or inside it) is the override's: it
+/// names `--set key=value` instead of the file.
+fn blame_override(e: SceneError, overrides: &[String]) -> SceneError {
+    let SceneError::Key { key, msg, path } = e else {
+        return e;
+    };
+    let set_key = |o: &str| -> String {
+        let k = o.split_once('=').map_or(o, |(k, _)| k);
+        k.split('.').map(str::trim).collect::<Vec<_>>().join(".")
+    };
+    // The last override of the key wins, as it does in the table.
+    let culprit = overrides.iter().rev().find(|o| {
+        let k = set_key(o);
+        key == k || key.starts_with(&format!("{k}.")) || key.starts_with(&format!("{k}["))
+    });
+    // A missing lambda is the fault of the override that chose the
+    // smoothing spline.
+    let culprit = culprit.or_else(|| {
+        (key == "surface.lambda" && msg.contains("needs lambda"))
+            .then(|| {
+                overrides
+                    .iter()
+                    .rev()
+                    .find(|o| set_key(o) == "surface.filter")
+            })
+            .flatten()
+    });
+    match culprit {
+        Some(o) => SceneError::Override {
+            arg: o.clone(),
+            msg: if key == set_key(o) {
+                msg
+            } else {
+                format!("[{key}] {msg}")
+            },
+        },
+        None => SceneError::Key { path, key, msg },
+    }
+}
+
+/// Every key of `t` as a dotted path with its value as written (TOML;
+/// [`Scene::parse`] replaces it by `--set key=value` for an override).
+fn written_keys(t: &toml::Table, prefix: &str, out: &mut Vec<(String, String)>) {
+    for (k, v) in t {
+        let key = format!("{prefix}{k}");
+        if let toml::Value::Table(sub) = v {
+            written_keys(sub, &format!("{key}."), out);
+        }
+        out.push((key, v.to_string()));
+    }
+}
+
+/// The settings in `written` that the resolved scene does not use, as
+/// messages (see [`Scene::ignored_settings`]).
+fn ignored_settings(
+    written: &[(String, String)],
+    f: &SceneFile,
+    surface: &Surface,
+    render: &RenderSettings,
+) -> Vec<String> {
+    let mut unused: Vec<(&str, String)> = Vec::new();
+    match f.camera.kind {
+        CameraKind::Perspective => unused.push((
+            "camera.height",
+            "a perspective camera's view is set by fov_y (height is for kind = \"orthographic\")"
+                .into(),
+        )),
+        CameraKind::Orthographic => unused.push((
+            "camera.fov_y",
+            "an orthographic camera's view is set by height (fov_y is for the perspective camera)"
+                .into(),
+        )),
+    }
+    if f.backdrop.checker.is_some() {
+        for key in ["backdrop.width", "backdrop.outside"] {
+            unused.push((
+                key,
+                "it applies to a photograph backdrop (image), not to a checkerboard".into(),
+            ));
+        }
+    } else {
+        unused.push((
+            "backdrop.checker_colors",
+            "it applies to a checkerboard backdrop, not to a photograph".into(),
+        ));
+    }
+    if render.traversal != Traversal::Step {
+        unused.push((
+            "render.step",
+            format!(
+                "it is the step of traversal = \"step\"; the {} traversal finds crossings cell by cell",
+                serde_name(render.traversal)
+            ),
+        ));
+    }
+    if render.supersampling == Supersampling::None {
+        for key in [
+            "samples",
+            "prss_samples",
+            "prss_map",
+            "prss_fallback",
+            "prss_curvature",
+            "footprint",
+            "seed",
+        ] {
+            unused.push((
+                match key {
+                    "samples" => "render.samples",
+                    "prss_samples" => "render.prss_samples",
+                    "prss_map" => "render.prss_map",
+                    "prss_fallback" => "render.prss_fallback",
+                    "prss_curvature" => "render.prss_curvature",
+                    "footprint" => "render.footprint",
+                    _ => "render.seed",
+                },
+                "render.supersampling is \"none\" (one ray per pixel); set it to grid, jitter, prss or footprint".into(),
+            ));
+        }
+    } else if render.supersampling != Supersampling::Footprint {
+        unused.push((
+            "render.footprint",
+            format!(
+                "it is the filter of supersampling = \"footprint\", not of \"{}\"",
+                serde_name(render.supersampling)
+            ),
+        ));
+    }
+    if !surface.filter.smooths() {
+        unused.push((
+            "surface.lambda",
+            format!(
+                "it is the smoothing weight of smooth-bspline3; filter {} does not smooth",
+                surface.filter.name()
+            ),
+        ));
+    }
+    unused
+        .into_iter()
+        .filter_map(|(key, why)| {
+            let (_, value) = written.iter().find(|(k, _)| k == key)?;
+            Some(match value.strip_prefix("--set ") {
+                Some(_) => format!("{value} is ignored: {why}"),
+                None => format!("[{key}] = {value} is ignored: {why}"),
+            })
+        })
+        .collect()
+}
+
+/// The name serde reads and writes for a unit variant (`"octree"`).
+fn serde_name<T: serde::Serialize>(v: T) -> String {
+    match serde_json::to_value(v) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => String::new(),
+    }
+}
+
+fn resolve(
+    f: SceneFile,
+    phantom: Option<PhantomSpec>,
+    path: &Path,
+    written: &[(String, String)],
+) -> Result<Scene, SceneError> {
     let bad = |key: &str, msg: String| SceneError::Key {
         path: path.to_path_buf(),
         key: key.to_string(),
@@ -795,7 +1242,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
     if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
         return Err(bad(
             "image",
-            format!("width and height must be in 1..={MAX_IMAGE_SIDE}, got {w}x{h}"),
+            format!("width and height must be from 1 to {MAX_IMAGE_SIDE}, got {w}x{h}"),
         ));
     }
     if (w as u64) * (h as u64) > MAX_IMAGE_PIXELS {
@@ -819,7 +1266,7 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
             if !(fov > 0.0 && fov < 180.0) {
                 return Err(bad(
                     "camera.fov_y",
-                    format!("must be in (0, 180) degrees, got {fov}"),
+                    format!("must be between 0 and 180 degrees (both excluded), got {fov}"),
                 ));
             }
             Projection::Perspective {
@@ -846,7 +1293,22 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         w,
         h,
     )
-    .map_err(|e| bad("camera", e.to_string()))?;
+    .map_err(|e| {
+        let key = match e {
+            CameraError::NotFinite(what) | CameraError::TooFar { what, .. } => {
+                format!("camera.{what}")
+            }
+            CameraError::BadHeight(_) | CameraError::ViewOverflow
+                if c.kind == CameraKind::Orthographic =>
+            {
+                "camera.height".into()
+            }
+            CameraError::BadFov(_) => "camera.fov_y".into(),
+            CameraError::UpParallel => "camera.up".into(),
+            _ => "camera".into(),
+        };
+        bad(&key, e.to_string())
+    })?;
 
     // [volume]
     let v = &f.volume;
@@ -890,7 +1352,16 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
                 allow_nan: v.allow_nan,
             }
         }
-        (None, Some(spec)) => VolumeSource::Phantom(spec.clone()),
+        (None, Some(_)) => {
+            let spec = phantom.expect("a phantom table is read before resolving");
+            spec.validate().map_err(|e| match e {
+                crate::phantom::PhantomError::Setting { key, msg } => {
+                    bad(&format!("volume.phantom.{key}"), msg)
+                }
+                e => bad("volume.phantom", e.to_string()),
+            })?;
+            VolumeSource::Phantom(spec)
+        }
     };
     if let Some(s) = v.spacing
         && !s.iter().all(|x| x.is_finite() && *x > 0.0)
@@ -903,8 +1374,14 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
 
     // [surface]
     let s = &f.surface;
-    let filter =
-        FilterKind::parse(&s.filter, s.lambda).map_err(|e| bad("surface.filter", e.to_string()))?;
+    let filter = FilterKind::with_lambda(&s.filter, s.lambda).map_err(|e| match e {
+        crate::filter::FilterError::Unknown(_) => bad("surface.filter", e.to_string()),
+        crate::filter::FilterError::BadLambda(_) => bad("surface.lambda", e.to_string()),
+        crate::filter::FilterError::NeedsLambda => bad(
+            "surface.lambda",
+            "filter smooth-bspline3 needs lambda, its smoothing weight (0 to 1e12, e.g. lambda = 1.0; 0 is bspline3)".into(),
+        ),
+    })?;
     if !s.iso.is_finite() {
         return Err(bad("surface.iso", format!("must be finite, got {}", s.iso)));
     }
@@ -1014,25 +1491,25 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
     if !(r.step.is_finite() && (MIN_STEP..=16.0).contains(&r.step)) {
         return Err(bad(
             "render.step",
-            format!("must be in [{MIN_STEP}, 16] voxels, got {}", r.step),
+            format!("must be from {MIN_STEP} to 16 voxels, got {}", r.step),
         ));
     }
     if r.max_events == 0 || r.max_events > 100_000 {
         return Err(bad(
             "render.max_events",
-            format!("must be in 1..=100000, got {}", r.max_events),
+            format!("must be from 1 to 100000, got {}", r.max_events),
         ));
     }
     if !(r.tolerance.is_finite() && r.tolerance >= 1e-12 && r.tolerance <= 0.1) {
         return Err(bad(
             "render.tolerance",
-            format!("must be in [1e-12, 0.1] voxels, got {}", r.tolerance),
+            format!("must be from 1e-12 to 0.1 voxels, got {}", r.tolerance),
         ));
     }
     if r.samples == 0 || r.samples > 64 {
         return Err(bad(
             "render.samples",
-            format!("must be in 1..=64, got {}", r.samples),
+            format!("must be from 1 to 64, got {}", r.samples),
         ));
     }
     let tile = r
@@ -1041,13 +1518,13 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
     if tile == 0 || tile > 256 {
         return Err(bad(
             "render.tile",
-            format!("must be in 1..=256, got {tile}"),
+            format!("must be from 1 to 256 pixels, got {tile}"),
         ));
     }
     if r.prss_samples == 0 || r.prss_samples > 64 {
         return Err(bad(
             "render.prss_samples",
-            format!("must be in 1..=64, got {}", r.prss_samples),
+            format!("must be from 1 to 64, got {}", r.prss_samples),
         ));
     }
     let classify = match r.classify.as_deref() {
@@ -1114,7 +1591,9 @@ fn resolve(f: SceneFile, path: &Path) -> Result<Scene, SceneError> {
         skip_clear_segments: r.skip_clear_segments,
     };
 
+    let ignored = ignored_settings(written, &f, &surface, &render);
     let scene = Scene {
+        ignored,
         path: path.to_path_buf(),
         width: w,
         height: h,
@@ -1321,8 +1800,9 @@ checker = 8.0
         assert_eq!(s.surface.ior, 1.33);
         assert_eq!(s.render.traversal, Traversal::Step);
         assert_eq!(s.surface.filter, FilterKind::Linear);
+        // An override's error names the override, not the file.
         let e = parse(&["surface.ior=-1"]).unwrap_err().to_string();
-        assert!(e.contains("test.toml") && e.contains("surface.ior"), "{e}");
+        assert!(e.starts_with("--set surface.ior=-1: "), "{e}");
         let e = parse(&["nonsense"]).unwrap_err().to_string();
         assert!(e.contains("--set nonsense"), "{e}");
         let s = parse(&["volume.path=x.nrrd"]).unwrap();
@@ -1356,7 +1836,8 @@ checker = 8.0
     fn errors_name_the_key() {
         let cases: &[(&[&str], &str)] = &[
             (&["surface.filter=gauss"], "surface.filter"),
-            (&["surface.lambda=-2"], "surface.filter"),
+            (&["surface.lambda=-2"], "surface.lambda"),
+            (&["surface.filter=smooth-bspline3"], "surface.lambda"),
             (&["camera.look_at=[31.5, 31.5, -150.0]"], "camera"),
             (&["camera.up=[0.0, 0.0, 1.0]"], "camera"),
             (&["camera.fov_y=0"], "camera.fov_y"),
@@ -1373,11 +1854,146 @@ checker = 8.0
         ];
         for (o, key) in cases {
             let e = parse(o).unwrap_err().to_string();
-            assert!(e.contains(key) && e.contains("test.toml"), "{o:?}: {e}");
+            assert!(e.contains(key), "{o:?}: {e}");
+            // The override that set the key, or the file for a key it
+            // only contributed to (`camera` from `camera.look_at`).
+            assert!(
+                e.starts_with("--set ") || e.starts_with("test.toml: "),
+                "{o:?}: {e}"
+            );
         }
         let e = Scene::parse("[image\nwidth=3", Path::new("bad.toml"), &[])
             .unwrap_err()
             .to_string();
         assert!(e.contains("bad.toml") && e.contains("line"), "{e}");
+    }
+
+    fn parse_text(edit: impl Fn(&str) -> String, o: &[&str]) -> Result<Scene, SceneError> {
+        let o: Vec<String> = o.iter().map(|s| s.to_string()).collect();
+        Scene::parse(&edit(SCENE), Path::new("test.toml"), &o)
+    }
+
+    /// serde's messages in words, each with its precise key; a file and a
+    /// `--set` of the same value say the same after their prefixes.
+    #[test]
+    fn messages_are_plain_and_name_the_key() {
+        let file = |from: &str, to: &str| {
+            parse_text(|s| s.replace(from, to), &[])
+                .unwrap_err()
+                .to_string()
+        };
+        let set = |o: &str| parse(&[o]).unwrap_err().to_string();
+        assert_eq!(
+            file("ior = 1.5", "ior = \"1.5\""),
+            "test.toml: [surface.ior] expected a number, got the text \"1.5\""
+        );
+        assert_eq!(
+            file("width = 64", "width = 32.0"),
+            "test.toml: [image.width] expected a whole number from 0 to 4294967295, got 32.0"
+        );
+        assert_eq!(
+            set("surface=3"),
+            "--set surface=3: expected a table of surface settings, got 3"
+        );
+        assert_eq!(
+            file("size = 32", "size = -64"),
+            "test.toml: [volume.phantom.size] expected a whole number from 0 to 9223372036854775807, got -64"
+        );
+        assert_eq!(
+            file("format = \"u8\"", "format = \"u12\""),
+            "test.toml: [volume.phantom.format] expected one of \"f32\", \"u8\", \"u16\", got \"u12\""
+        );
+        let seed = "18446744073709551615";
+        let f = parse_text(|s| format!("{s}\n[render]\nseed = {seed}\n"), &[])
+            .unwrap_err()
+            .to_string();
+        let o = set(&format!("render.seed={seed}"));
+        assert_eq!(
+            f.strip_prefix("test.toml: [render.seed] "),
+            o.strip_prefix(&format!("--set render.seed={seed}: "))
+        );
+        assert!(f.contains("up to 9223372036854775807"), "{f}");
+        let f = file("iso = 127.5", "iso = 1e400");
+        let o = set("surface.iso=1e400");
+        assert_eq!(
+            f.strip_prefix("test.toml: [surface.iso] "),
+            o.strip_prefix("--set surface.iso=1e400: ")
+        );
+        let e = set("volume.phantom.radius=-20");
+        assert_eq!(
+            e,
+            "--set volume.phantom.radius=-20: must be a finite number >= 0, got -20"
+        );
+        let e = file("size = 32", "size = 32\nradius = -20.0");
+        assert!(e.starts_with("test.toml: [volume.phantom.radius] "), "{e}");
+        let e = file(
+            "position = [31.5, 31.5, -150.0]",
+            "position = [31.5, 31.5, -1e307]",
+        );
+        assert!(
+            e.starts_with("test.toml: [camera.position] ") && e.contains("1e150"),
+            "{e}"
+        );
+        let e = parse(&["camera.kind=orthographic", "camera.height=-1"])
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("--set camera.height=-1: "), "{e}");
+        let e = parse(&["surface.lambda=-1"]).unwrap_err().to_string();
+        assert!(e.starts_with("--set surface.lambda=-1: "), "{e}");
+        let e = parse(&["surface.filter=smooth-bspline3"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("--set surface.filter=smooth-bspline3: [surface.lambda] "),
+            "{e}"
+        );
+    }
+
+    /// Settings written but unused are reported; defaults and used
+    /// settings are not.
+    #[test]
+    fn ignored_settings_are_the_written_unused_ones() {
+        assert!(parse(&[]).unwrap().ignored_settings().is_empty());
+        let s = parse(&[
+            "camera.height=3",
+            "backdrop.width=2",
+            "render.step=0.5",
+            "render.samples=3",
+            "render.seed=7",
+            "render.footprint=ewa",
+            "surface.lambda=1",
+        ])
+        .unwrap();
+        let ignored = s.ignored_settings();
+        assert_eq!(ignored.len(), 7, "{ignored:?}");
+        assert!(
+            ignored[0].starts_with("--set camera.height=3 is ignored"),
+            "{ignored:?}"
+        );
+        // In the file, named by its key.
+        let s = parse_text(
+            |s| s.replace("fov_y = 20.0", "fov_y = 20.0\nheight = 5.0"),
+            &[],
+        )
+        .unwrap();
+        assert_eq!(s.ignored_settings().len(), 1);
+        assert!(s.ignored_settings()[0].starts_with("[camera.height] = 5.0 is ignored"));
+        // Used: the smoothing spline's lambda, the step of step traversal,
+        // footprint settings with footprint supersampling.
+        let s = parse(&[
+            "surface.filter=smooth-bspline3",
+            "surface.lambda=1",
+            "render.traversal=step",
+            "render.step=0.5",
+            "render.supersampling=footprint",
+            "render.footprint=ewa",
+            "render.samples=3",
+        ])
+        .unwrap();
+        assert!(
+            s.ignored_settings().is_empty(),
+            "{:?}",
+            s.ignored_settings()
+        );
     }
 }

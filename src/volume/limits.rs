@@ -3,7 +3,7 @@
 //! A header can claim any size; we refuse early with a message instead of letting
 //! the allocator abort the process. The default limit is 80% of the memory the
 //! kernel reports available, overridable with `SNELL_MEMORY_LIMIT` (bytes, or with
-//! a `K`/`M`/`G` suffix) or `--memory-limit` on the command line.
+//! a `K`/`M`/`G`/`T` suffix, binary multiples; see [`parse_bytes`]) or `--memory-limit` on the command line.
 
 use std::path::Path;
 
@@ -13,25 +13,43 @@ use super::VolumeError;
 /// grid, the `f32` padded coefficients, and a byte of slack for cell tags.
 pub const WORKING_BYTES_PER_SAMPLE: u64 = 17;
 
-/// Parses `123`, `64K`, `512M`, `1.5G`, `20G` (binary units; a fraction
-/// rounds to whole bytes).
+/// Parses a size: a byte count (`123`, `1e9`, `512B`), or a number with
+/// `K`, `M`, `G` or `T` and an optional `B` or `iB` (`64K`, `512MB`,
+/// `1.5G`, `2GiB`), case-insensitive. The multiples are binary whichever
+/// way they are written (`1G` = `1GB` = `1GiB` = 2^30 bytes), as they have
+/// always been here; a fraction rounds to whole bytes. Signs, infinities
+/// and NaN are refused.
 pub fn parse_bytes(s: &str) -> Option<u64> {
-    let s = s.trim();
-    let (num, mul) = match s.chars().last()?.to_ascii_uppercase() {
-        'K' => (&s[..s.len() - 1], 1u64 << 10),
-        'M' => (&s[..s.len() - 1], 1u64 << 20),
-        'G' => (&s[..s.len() - 1], 1u64 << 30),
-        'T' => (&s[..s.len() - 1], 1u64 << 40),
-        _ => (s, 1),
+    let lower = s.trim().to_ascii_lowercase();
+    let t = lower
+        .strip_suffix("ib")
+        .or_else(|| lower.strip_suffix('b'))
+        .unwrap_or(&lower);
+    // "ib" alone ("5ib") is not a unit: it must follow K, M, G or T.
+    let binary_suffix = lower.ends_with("ib");
+    let (num, mul) = match t.chars().last()? {
+        'k' => (&t[..t.len() - 1], 1u64 << 10),
+        'm' => (&t[..t.len() - 1], 1u64 << 20),
+        'g' => (&t[..t.len() - 1], 1u64 << 30),
+        't' => (&t[..t.len() - 1], 1u64 << 40),
+        _ if binary_suffix => return None,
+        _ => (t, 1),
     };
     let num = num.trim();
     if let Ok(n) = num.parse::<u64>() {
         return n.checked_mul(mul);
     }
-    // A fraction of a unit, e.g. 1.5G.
+    // A fraction of a unit (1.5G) or an exponent (1e9): digits, one point,
+    // an exponent; no sign, `inf` or `nan`.
+    if !num.starts_with(|c: char| c.is_ascii_digit() || c == '.')
+        || !num
+            .bytes()
+            .all(|b| b.is_ascii_digit() || matches!(b, b'.' | b'e' | b'-' | b'+'))
+    {
+        return None;
+    }
     let x = num.parse::<f64>().ok()? * mul as f64;
-    (num.bytes().all(|b| b.is_ascii_digit() || b == b'.') && x < u64::MAX as f64)
-        .then(|| x.round() as u64)
+    (x.is_finite() && x >= 0.0 && x < u64::MAX as f64).then(|| x.round() as u64)
 }
 
 /// Memory the kernel says is available (`MemAvailable`), if it can be read.
@@ -53,7 +71,7 @@ pub fn default_memory_limit() -> u64 {
                 static WARNED: std::sync::Once = std::sync::Once::new();
                 WARNED.call_once(|| {
                     eprintln!(
-                        "warning: SNELL_MEMORY_LIMIT='{s}' is not a size like 512M, 1.5G or 8G; ignored"
+                        "warning: SNELL_MEMORY_LIMIT='{s}' is not a size like 512M, 2GB, 1.5GiB or 1e9; ignored"
                     )
                 });
             }
@@ -115,14 +133,35 @@ mod tests {
             "",
             "lots",
             "-5G",
-            "1e3",
+            "-1e3",
             "NaN",
             "inf",
+            "infG",
             "1.5.2G",
             "99999999999T",
+            "5iB",
+            "1e30",
+            "G",
+            "GB",
         ] {
             assert_eq!(parse_bytes(bad), None, "{bad}");
         }
+    }
+
+    /// `B` and `iB` suffixes and exponents are accepted; the multiples stay
+    /// binary however they are written.
+    #[test]
+    fn parses_byte_suffixes_and_exponents() {
+        assert_eq!(parse_bytes("2GB"), Some(2 << 30));
+        assert_eq!(parse_bytes("2GiB"), Some(2 << 30));
+        assert_eq!(parse_bytes("2gib"), Some(2 << 30));
+        assert_eq!(parse_bytes("512MB"), Some(512 << 20));
+        assert_eq!(parse_bytes("1.5TiB"), Some(3 << 39));
+        assert_eq!(parse_bytes("64kb"), Some(64 << 10));
+        assert_eq!(parse_bytes("100B"), Some(100));
+        assert_eq!(parse_bytes("1e9"), Some(1_000_000_000));
+        assert_eq!(parse_bytes("1e3"), Some(1000));
+        assert_eq!(parse_bytes("2.5e3K"), Some(2_560_000));
     }
 
     #[test]

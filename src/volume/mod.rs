@@ -222,6 +222,7 @@ impl Volume {
     ) -> Result<Volume, VolumeError> {
         check_dims(dims)?;
         check_spacing(spacing)?;
+        check_extent(dims, spacing)?;
         let n = dims[0] * dims[1] * dims[2];
         if samples.len() != n {
             return Err(VolumeError::Invalid(format!(
@@ -265,6 +266,7 @@ impl Volume {
     /// Sets the spacing (e.g. from a scene file that overrides the header).
     pub fn set_spacing(&mut self, spacing: [f64; 3]) -> Result<(), VolumeError> {
         check_spacing(spacing)?;
+        check_extent(self.dims, spacing)?;
         self.spacing = spacing;
         Ok(())
     }
@@ -358,6 +360,23 @@ pub(crate) fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
             "spacing {:?} must be finite and positive",
             spacing
         )));
+    }
+    Ok(())
+}
+
+/// Refuses a spacing whose domain overflows: `(n − 1) × spacing` along an
+/// axis must be finite, or every world position on it is infinite (a
+/// header's `spacings: 1e308` over 103 samples, say).
+pub(crate) fn check_extent(dims: [usize; 3], spacing: [f64; 3]) -> Result<(), VolumeError> {
+    for a in 0..3 {
+        let n = dims[a].saturating_sub(1);
+        if !(n as f64 * spacing[a]).is_finite() {
+            return Err(VolumeError::Invalid(format!(
+                "the extent along {} ({n} spacings of {}) overflows the f64 range; the spacing is too large",
+                ["x", "y", "z"][a],
+                crate::human::num(spacing[a])
+            )));
+        }
     }
     Ok(())
 }
@@ -617,6 +636,21 @@ mod tests {
                 ..
             }
         ));
+    }
+
+    /// A spacing each of whose axes is finite, but whose domain is not.
+    #[test]
+    fn extent_must_be_finite() {
+        let v = |s: f64| Volume::new([3, 1, 1], [s, 1.0, 1.0], SampleType::U8, vec![0.0; 3]);
+        assert!(v(f64::MAX / 2.0).is_ok());
+        let e = v(f64::MAX).unwrap_err();
+        assert!(e.to_string().contains("extent along x (2 spacings"), "{e}");
+        let mut ok = v(1.0).unwrap();
+        assert!(ok.set_spacing([1e308, 1.0, 1.0]).is_err());
+        assert_eq!(ok.spacing(), [1.0; 3]);
+        // One sample along an axis spans nothing, whatever its spacing.
+        let one = Volume::new([1, 1, 1], [f64::MAX; 3], SampleType::U8, vec![0.0]);
+        assert!(one.is_ok());
     }
 
     #[test]

@@ -1,0 +1,104 @@
+//! Numbers in messages and text reports.
+//!
+//! [`num`] is for people: at most 7 significant digits, scientific notation
+//! for very large and very small magnitudes, so a value range of f32 noise
+//! does not print 45 digits. [`exact`] is for machine output (CSV): the
+//! shortest text that reads back to the same `f64`, in scientific notation
+//! at the extremes instead of Rust's positional `{}` (which writes 1e-20 as
+//! 22 characters and 1e300 as 301). JSON goes through `serde_json`, which
+//! already writes the shortest round trip.
+
+/// Significant digits of [`num`].
+const DIGITS: i32 = 7;
+
+/// `x` for people: up to 7 significant digits without trailing zeros,
+/// positional from 1e-4 to below 1e7, scientific beyond (`1.523944e-29`,
+/// `1e308`); `inf`, `-inf`, `NaN` as such.
+pub fn num(x: f64) -> String {
+    if !x.is_finite() {
+        return x.to_string();
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    let mag = x.abs();
+    if (1e-4..1e7).contains(&mag) {
+        let exp = mag.log10().floor() as i32;
+        let decimals = (DIGITS - 1 - exp).max(0) as usize;
+        let s = format!("{x:.decimals$}");
+        // Rounding can carry to a new digit (9999999.6 → 10000000): still
+        // one more digit than asked at most, and exact.
+        return trim_fraction(&s);
+    }
+    let s = format!("{x:.prec$e}", prec = (DIGITS - 1) as usize);
+    match s.split_once('e') {
+        Some((mantissa, exp)) => format!("{}e{exp}", trim_fraction(mantissa)),
+        None => s,
+    }
+}
+
+/// Three numbers as `a x b x c` with [`num`].
+pub fn triple(v: [f64; 3]) -> String {
+    format!("{} x {} x {}", num(v[0]), num(v[1]), num(v[2]))
+}
+
+/// `x` for machine output: the shortest text that parses back to the same
+/// `f64`, positional from 1e-5 to below 1e16, scientific beyond.
+pub fn exact(x: f64) -> String {
+    let mag = x.abs();
+    if !x.is_finite() || x == 0.0 || (1e-5..1e16).contains(&mag) {
+        x.to_string()
+    } else {
+        format!("{x:e}")
+    }
+}
+
+fn trim_fraction(s: &str) -> String {
+    if s.contains('.') {
+        s.trim_end_matches('0').trim_end_matches('.').to_string()
+    } else {
+        s.to_string()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn people_get_seven_digits_and_scientific_extremes() {
+        assert_eq!(num(0.0), "0");
+        assert_eq!(num(1.0), "1");
+        assert_eq!(num(-2.5), "-2.5");
+        assert_eq!(num(31474.366056460993), "31474.37");
+        assert_eq!(num(0.1 + 0.2), "0.3");
+        assert_eq!(num(1.5239444297167634e-29), "1.523944e-29");
+        assert_eq!(num(-3.848773152033876e-15), "-3.848773e-15");
+        assert_eq!(num(1e308), "1e308");
+        assert_eq!(num(12345678.0), "1.234568e7");
+        assert_eq!(num(0.00012345678), "0.0001234568");
+        assert_eq!(num(f64::INFINITY), "inf");
+        assert_eq!(num(f64::NAN), "NaN");
+        assert_eq!(triple([1.0, 0.5, 2.0]), "1 x 0.5 x 2");
+    }
+
+    #[test]
+    fn machine_output_round_trips() {
+        for x in [
+            -3.848773152033876e-15,
+            1.5239444297167634e-29,
+            0.1,
+            31474.366056460993,
+            1e300,
+            123.0,
+            -0.0,
+            f64::MIN_POSITIVE,
+        ] {
+            let s = exact(x);
+            assert_eq!(s.parse::<f64>().unwrap().to_bits(), x.to_bits(), "{s}");
+            assert!(s.len() <= 24, "{s}");
+        }
+        assert_eq!(exact(-3.848773152033876e-15), "-3.848773152033876e-15");
+        assert_eq!(exact(0.5), "0.5");
+    }
+}
