@@ -936,6 +936,16 @@ fn first_use_messages_warnings_and_help() {
         let o = run(&["info", ph.to_str().unwrap(), "--memory-limit", size]);
         assert!(o.status.success(), "{size}: {}", stderr(&o));
     }
+    // A limit that rounds to zero bytes would refuse every volume.
+    for size in ["0", "0.4", "1e-9"] {
+        let o = run(&["info", ph.to_str().unwrap(), "--memory-limit", size]);
+        assert!(!o.status.success(), "{size}");
+        assert!(
+            stderr(&o).contains("under one byte"),
+            "{size}: {}",
+            stderr(&o)
+        );
+    }
 
     let help = |args: &[&str]| String::from_utf8_lossy(&run(args).stdout).into_owned();
     let h = help(&["classify", "--help"]);

@@ -62,9 +62,9 @@ fn named_format(path: &Path) -> Option<&'static str> {
 /// `--memory-limit`, or the default limit.
 pub fn memory_limit(arg: Option<&str>) -> anyhow::Result<u64> {
     Ok(match arg {
-        Some(s) => limits::parse_bytes(s).with_context(|| {
-            format!("--memory-limit: '{s}' is not a size like 512M, 2GB, 1.5GiB or 1e9")
-        })?,
+        Some(s) => {
+            limits::parse_bytes(s).map_err(|why| anyhow::anyhow!("--memory-limit: {why}"))?
+        }
         None => limits::default_memory_limit(),
     })
 }

@@ -16,10 +16,26 @@ pub const WORKING_BYTES_PER_SAMPLE: u64 = 17;
 /// Parses a size: a byte count (`123`, `1e9`, `512B`), or a number with
 /// `K`, `M`, `G` or `T` and an optional `B` or `iB` (`64K`, `512MB`,
 /// `1.5G`, `2GiB`), case-insensitive. The multiples are binary whichever
-/// way they are written (`1G` = `1GB` = `1GiB` = 2^30 bytes), as they have
-/// always been here; a fraction rounds to whole bytes. Signs, infinities
-/// and NaN are refused.
-pub fn parse_bytes(s: &str) -> Option<u64> {
+/// way they are written (`1G` = `1GB` = `1GiB` = 2^30 bytes): memory comes
+/// in powers of two, and one reading of a suffix spares the user guessing
+/// which one was meant. A fraction rounds to whole bytes. Signs,
+/// infinities and NaN are refused, and so is a size under one byte (`0`,
+/// `0.4`, `1e-9`): a limit of zero bytes would refuse every load. The
+/// error says why, to follow the option or variable's name.
+pub fn parse_bytes(s: &str) -> Result<u64, String> {
+    let bytes = parse_size(s)
+        .ok_or_else(|| format!("'{}' is not a size like 512M, 2GB, 1.5GiB or 1e9", s.trim()))?;
+    if bytes == 0 {
+        return Err(format!(
+            "'{}' is under one byte; a limit of zero bytes would refuse every volume",
+            s.trim()
+        ));
+    }
+    Ok(bytes)
+}
+
+/// [`parse_bytes`] without its lower bound: the size in whole bytes.
+fn parse_size(s: &str) -> Option<u64> {
     let lower = s.trim().to_ascii_lowercase();
     let t = lower
         .strip_suffix("ib")
@@ -66,14 +82,10 @@ pub fn available_memory() -> Option<u64> {
 pub fn default_memory_limit() -> u64 {
     if let Ok(s) = std::env::var("SNELL_MEMORY_LIMIT") {
         match parse_bytes(&s) {
-            Some(v) => return v,
-            None => {
+            Ok(v) => return v,
+            Err(why) => {
                 static WARNED: std::sync::Once = std::sync::Once::new();
-                WARNED.call_once(|| {
-                    eprintln!(
-                        "warning: SNELL_MEMORY_LIMIT='{s}' is not a size like 512M, 2GB, 1.5GiB or 1e9; ignored"
-                    )
-                });
+                WARNED.call_once(|| eprintln!("warning: SNELL_MEMORY_LIMIT: {why}; ignored"));
             }
         }
     }
@@ -117,18 +129,18 @@ mod tests {
 
     #[test]
     fn parses_sizes() {
-        assert_eq!(parse_bytes("1024"), Some(1024));
-        assert_eq!(parse_bytes("2K"), Some(2048));
-        assert_eq!(parse_bytes("3g"), Some(3 << 30));
-        assert_eq!(parse_bytes("x"), None);
-        assert_eq!(parse_bytes("99999999999999T"), None);
+        assert_eq!(parse_bytes("1024").ok(), Some(1024));
+        assert_eq!(parse_bytes("2K").ok(), Some(2048));
+        assert_eq!(parse_bytes("3g").ok(), Some(3 << 30));
+        assert!(parse_bytes("x").is_err());
+        assert!(parse_bytes("99999999999999T").is_err());
     }
 
     #[test]
-    fn parses_fractions_and_refuses_signs_and_exponents() {
-        assert_eq!(parse_bytes(" 512m "), Some(512 << 20));
-        assert_eq!(parse_bytes("1.5G"), Some(3 << 29));
-        assert_eq!(parse_bytes("0.5K"), Some(512));
+    fn parses_fractions_and_refuses_signs_and_words() {
+        assert_eq!(parse_bytes(" 512m ").ok(), Some(512 << 20));
+        assert_eq!(parse_bytes("1.5G").ok(), Some(3 << 29));
+        assert_eq!(parse_bytes("0.5K").ok(), Some(512));
         for bad in [
             "",
             "lots",
@@ -144,7 +156,8 @@ mod tests {
             "G",
             "GB",
         ] {
-            assert_eq!(parse_bytes(bad), None, "{bad}");
+            let e = parse_bytes(bad).unwrap_err();
+            assert!(e.contains("is not a size like"), "{bad}: {e}");
         }
     }
 
@@ -152,16 +165,28 @@ mod tests {
     /// binary however they are written.
     #[test]
     fn parses_byte_suffixes_and_exponents() {
-        assert_eq!(parse_bytes("2GB"), Some(2 << 30));
-        assert_eq!(parse_bytes("2GiB"), Some(2 << 30));
-        assert_eq!(parse_bytes("2gib"), Some(2 << 30));
-        assert_eq!(parse_bytes("512MB"), Some(512 << 20));
-        assert_eq!(parse_bytes("1.5TiB"), Some(3 << 39));
-        assert_eq!(parse_bytes("64kb"), Some(64 << 10));
-        assert_eq!(parse_bytes("100B"), Some(100));
-        assert_eq!(parse_bytes("1e9"), Some(1_000_000_000));
-        assert_eq!(parse_bytes("1e3"), Some(1000));
-        assert_eq!(parse_bytes("2.5e3K"), Some(2_560_000));
+        assert_eq!(parse_bytes("2GB").ok(), Some(2 << 30));
+        assert_eq!(parse_bytes("2GiB").ok(), Some(2 << 30));
+        assert_eq!(parse_bytes("2gib").ok(), Some(2 << 30));
+        assert_eq!(parse_bytes("512MB").ok(), Some(512 << 20));
+        assert_eq!(parse_bytes("1.5TiB").ok(), Some(3 << 39));
+        assert_eq!(parse_bytes("64kb").ok(), Some(64 << 10));
+        assert_eq!(parse_bytes("100B").ok(), Some(100));
+        assert_eq!(parse_bytes("1e9").ok(), Some(1_000_000_000));
+        assert_eq!(parse_bytes("1e3").ok(), Some(1000));
+        assert_eq!(parse_bytes("2.5e3K").ok(), Some(2_560_000));
+    }
+
+    /// A size that rounds to zero bytes would refuse every load: refused,
+    /// saying so; half a byte rounds up to one.
+    #[test]
+    fn refuses_sizes_under_one_byte() {
+        for zero in ["0", "0.4", "1e-9", "0K", "0.0000000001G", "0B"] {
+            let e = parse_bytes(zero).unwrap_err();
+            assert!(e.contains("under one byte"), "{zero}: {e}");
+        }
+        assert_eq!(parse_bytes("0.5").ok(), Some(1));
+        assert_eq!(parse_bytes("1").ok(), Some(1));
     }
 
     #[test]
