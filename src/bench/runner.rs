@@ -23,7 +23,7 @@ use crate::prepare::{Cache, Prepared};
 use crate::reference::Reference;
 use crate::render::stats::{STAGES, Stage};
 use crate::render::{self, Frame, PrepareTimes};
-use crate::scene::{DEFAULT_CLASSIFY, Scene, Supersampling};
+use crate::scene::{DEFAULT_CLASSIFY, Scene, Supersampling, setting_name};
 use crate::volume::LoadOptions;
 
 use super::machine;
@@ -672,15 +672,6 @@ fn color_image(frame: &Frame) -> RgbImage {
         width: frame.film.width,
         height: frame.film.height,
         pixels: frame.film.color.clone(),
-    }
-}
-
-/// The scene-file spelling of a setting (`octree`, `prss`), through serde so
-/// new variants need no change here.
-fn setting_name<T: serde::Serialize>(v: &T) -> String {
-    match serde_json::to_value(v) {
-        Ok(serde_json::Value::String(s)) => s,
-        _ => "?".into(),
     }
 }
 

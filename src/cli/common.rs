@@ -187,7 +187,8 @@ pub fn filter_kind(filter: &str, lambda: Option<f64>) -> anyhow::Result<FilterKi
         FilterError::Unknown(_) => anyhow::anyhow!("--filter: {e}"),
         FilterError::BadLambda(_) => anyhow::anyhow!("--lambda: {e}"),
         FilterError::NeedsLambda => anyhow::anyhow!(
-            "--filter smooth-bspline3 needs --lambda L, its smoothing weight (0 to 1e12; 1 smooths away u8 rounding noise, 0 is bspline3)"
+            "--filter smooth-bspline3 needs --lambda L, {}",
+            snell::filter::LAMBDA_HELP
         ),
     })?;
     if let Some(l) = lambda

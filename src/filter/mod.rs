@@ -61,11 +61,14 @@ pub enum FilterError {
         crate::human::num(*.0)
     )]
     BadLambda(f64),
-    #[error(
-        "smooth-bspline3 needs its smoothing weight λ (0 to 1e12; 1 smooths away u8 rounding noise, 0 is bspline3)"
-    )]
+    #[error("smooth-bspline3 needs λ, {LAMBDA_HELP}")]
     NeedsLambda,
 }
+
+/// What the smoothing spline's `λ` is and which values to give, for every
+/// message that asks for it (the scene's `lambda`, the CLI's `--lambda`).
+pub const LAMBDA_HELP: &str =
+    "its smoothing weight (0 to 1e12; 1 smooths away u8 rounding noise, 0 is bspline3)";
 
 /// The largest smoothing `λ` accepted. Far below it the smoothing spline is
 /// already flat (at `λ = 1e6` the 32³ sphere phantom reconstructs to its mean

@@ -578,6 +578,11 @@ pub struct Scene {
     /// Settings the scene file or `--set` wrote that this scene does not
     /// use, one message each (see [`Scene::ignored_settings`]).
     ignored: Vec<String>,
+    /// The `--set` overrides it was read with, to name one as the cause of
+    /// an error found later (in [`Scene::load_volume`]).
+    overrides: Vec<String>,
+    /// The keys the file or `--set` wrote (see [`written_keys`]).
+    written: Vec<(String, String)>,
 }
 
 impl Scene {
@@ -629,11 +634,7 @@ impl Scene {
         written_keys(&table, "", &mut written);
         // A key an override set is named as that override in warnings.
         for (key, shown) in &mut written {
-            if let Some(o) = overrides.iter().rev().find(|o| {
-                o.split_once('=').is_some_and(|(k, _)| {
-                    k.split('.').map(str::trim).collect::<Vec<_>>().join(".") == *key
-                })
-            }) {
+            if let Some(o) = culprit_override(key, overrides) {
                 *shown = format!("--set {o}");
             }
         }
@@ -647,7 +648,7 @@ impl Scene {
             .map_err(|e| {
                 let key = e.path().to_string();
                 let key = if key == "." { "scene".into() } else { key };
-                key_error(key, plain_serde_message(&e.into_inner().to_string()))
+                key_error(key, plain_serde_message(e.into_inner().message()))
             })
             .and_then(|file: SceneFile| {
                 let phantom = match &file.volume.phantom {
@@ -656,11 +657,24 @@ impl Scene {
                 };
                 resolve(file, phantom, path, &written)
             });
-        result.map_err(|e| blame_override(e, overrides))
+        match result {
+            Ok(mut scene) => {
+                scene.overrides = overrides.to_vec();
+                scene.written = written;
+                Ok(scene)
+            }
+            Err(e) => Err(blame_override(e, overrides, &written)),
+        }
     }
 
     /// Loads (or builds) the volume and applies the scene's spacing override.
+    /// An error on a key a `--set` wrote names that `--set`.
     pub fn load_volume(&self, opts: &LoadOptions) -> Result<Volume, SceneError> {
+        self.load_volume_unblamed(opts)
+            .map_err(|e| blame_override(e, &self.overrides, &self.written))
+    }
+
+    fn load_volume_unblamed(&self, opts: &LoadOptions) -> Result<Volume, SceneError> {
         let mut vol = match &self.volume {
             VolumeSource::File {
                 path,
@@ -701,14 +715,8 @@ impl Scene {
                         },
                         e => phantom_error(e.to_string()),
                     })?;
-                spec.build().map_err(|e| match e {
-                    crate::phantom::PhantomError::Setting { key, msg } => SceneError::Key {
-                        path: self.path.clone(),
-                        key: format!("volume.phantom.{key}"),
-                        msg,
-                    },
-                    e => phantom_error(e.to_string()),
-                })?
+                // Its settings were checked when the scene was read.
+                spec.build().map_err(|e| phantom_error(e.to_string()))?
             }
         };
         if let Some(s) = self.spacing {
@@ -798,10 +806,11 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
         arg: arg.to_string(),
         msg: msg.to_string(),
     };
-    let (key, value) = arg
+    let (_, value) = arg
         .split_once('=')
         .ok_or_else(|| err("expected section.key=value"))?;
-    let parts: Vec<&str> = key.trim().split('.').map(str::trim).collect();
+    let key = override_key(arg);
+    let parts: Vec<&str> = key.split('.').collect();
     if parts.iter().any(|p| p.is_empty()) {
         return Err(err("empty key"));
     }
@@ -810,7 +819,7 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
         Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.into())),
         // A number TOML cannot hold is refused as in a file, not taken
         // for a word.
-        Err(e) => match number_reason(e.message(), value) {
+        Err(_) => match number_reason(value) {
             Some(msg) => return Err(err(&msg)),
             None => toml::Value::String(value.to_string()),
         },
@@ -869,7 +878,7 @@ fn phantom_spec(v: toml::Value) -> Result<PhantomSpec, (String, String)> {
             } else {
                 format!("volume.phantom.{key}")
             };
-            (key, plain_serde_message(&e.into_inner().to_string()))
+            (key, plain_serde_message(e.into_inner().message()))
         })
     }
     match kind.as_ref().and_then(|k| k.as_str()) {
@@ -903,14 +912,9 @@ fn plain_value(v: &toml::Value) -> String {
 /// f64` becomes `expected a number, got the text "1.5"`, Rust type names
 /// become ranges (`u32`: a whole number from 0 to 4294967295; TOML's
 /// integers are `i64`, so `u64` and `usize` reach 9223372036854775807) and
-/// the struct names the settings they hold. The `in \`key\`` serde adds is
-/// dropped: the caller names the key.
+/// the struct names the settings they hold. `msg` is the message alone
+/// ([`toml::de::Error::message`]): the caller names the key.
 pub(crate) fn plain_serde_message(msg: &str) -> String {
-    let msg = msg.trim();
-    let msg = match msg.rfind("\nin `") {
-        Some(i) => &msg[..i],
-        None => msg,
-    };
     let msg = msg.trim().replace('\n', " ");
     let expected = |e: &str| -> String {
         let e = e.trim();
@@ -986,41 +990,113 @@ pub(crate) fn plain_serde_message(msg: &str) -> String {
     if let Some(rest) = msg.strip_prefix("unknown field ") {
         return format!("unknown key {rest}");
     }
+    // serde lists the variants as `a`, `a` or `b`, or one of `a`, `b`, `c`.
     if let Some(rest) = msg.strip_prefix("unknown variant ")
-        && let Some((got, one_of)) = rest.split_once(", expected one of ")
+        && let Some((got, expected)) = rest.split_once(", expected ")
     {
         return format!(
-            "expected one of {}, got \"{}\"",
-            one_of.replace('`', "\""),
+            "expected {}, got \"{}\"",
+            expected.replace('`', "\""),
             got.trim_matches('`')
         );
     }
     msg
 }
 
-/// The reason TOML refused a number, in the words both a scene file and a
-/// `--set` value get.
-fn number_reason(reason: &str, text: &str) -> Option<String> {
-    let r = reason.trim();
-    if r.contains("value was too large") || r.contains("value was too small") {
-        Some(if text.starts_with('-') {
-            format!(
-                "whole numbers go down to {} (TOML integers are signed 64-bit), got {text}",
-                i64::MIN
-            )
-        } else {
-            format!(
-                "whole numbers go up to {} (TOML integers are signed 64-bit), got {text}",
-                i64::MAX
-            )
-        })
-    } else if r.contains("floating-point number overflowed") {
-        Some(format!(
-            "numbers must be finite; {text} is beyond the largest 64-bit float (about 1.8e308)"
-        ))
-    } else {
-        None
+/// Why TOML refused `text` if it is a number TOML cannot hold, in the
+/// words both a scene file and a `--set` value get: an integer literal
+/// outside `i64` (TOML's integers), or a float literal beyond `f64`.
+/// Decided from the literal itself, since TOML words these refusals
+/// differently by size.
+fn number_reason(text: &str) -> Option<String> {
+    let text = text.trim();
+    let t: String = text.chars().filter(|&c| c != '_').collect();
+    let (negative, unsigned) = match t.strip_prefix('-') {
+        Some(rest) => (true, rest),
+        None => (false, t.strip_prefix('+').unwrap_or(&t)),
+    };
+    let (radix, digits) = match unsigned.get(..2) {
+        Some("0x") if unsigned.len() == t.len() => (16, &unsigned[2..]),
+        Some("0o") if unsigned.len() == t.len() => (8, &unsigned[2..]),
+        Some("0b") if unsigned.len() == t.len() => (2, &unsigned[2..]),
+        _ => (10, unsigned),
+    };
+    if !digits.is_empty() && digits.chars().all(|c| c.is_digit(radix)) {
+        // Digits beyond i128 do not fit i64 either.
+        let fits = i128::from_str_radix(digits, radix)
+            .ok()
+            .and_then(|v| i64::try_from(if negative { -v } else { v }).ok())
+            .is_some();
+        return (!fits).then(|| {
+            if negative {
+                format!(
+                    "whole numbers go down to {} (TOML integers are signed 64-bit), got {text}",
+                    i64::MIN
+                )
+            } else {
+                format!(
+                    "whole numbers go up to {} (TOML integers are signed 64-bit), got {text}",
+                    i64::MAX
+                )
+            }
+        });
     }
+    let float_syntax = unsigned.starts_with(|c: char| c.is_ascii_digit())
+        && unsigned
+            .chars()
+            .all(|c| c.is_ascii_digit() || matches!(c, '.' | 'e' | 'E' | '+' | '-'));
+    (float_syntax && t.parse::<f64>().is_ok_and(f64::is_infinite)).then(|| {
+        format!("numbers must be finite; {text} is beyond the largest 64-bit float (about 1.8e308)")
+    })
+}
+
+/// `s` as a TOML key (`camera.look_at`, `"a b".c`), without the `[`/`]`
+/// of a header or the `=` after it.
+fn is_toml_key(s: &str) -> bool {
+    s.split('.').all(|part| {
+        let part = part.trim();
+        let bare = !part.is_empty()
+            && part
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '-');
+        let quoted = part.len() >= 2
+            && part.starts_with('"')
+            && part.ends_with('"')
+            && !part[1..part.len() - 1].contains('"');
+        bare || quoted
+    })
+}
+
+/// `line` without a trailing `# comment` (none inside quotes).
+fn strip_comment(line: &str) -> &str {
+    let mut quoted = false;
+    for (i, c) in line.char_indices() {
+        match c {
+            '"' => quoted = !quoted,
+            '#' if !quoted => return &line[..i],
+            _ => {}
+        }
+    }
+    line
+}
+
+/// The table a `[section]` (or `[[section]]`) header line names, if the
+/// line is one.
+fn section_header(line: &str) -> Option<String> {
+    let l = strip_comment(line).trim();
+    let name = l
+        .strip_prefix("[[")
+        .and_then(|l| l.strip_suffix("]]"))
+        .or_else(|| l.strip_prefix('[').and_then(|l| l.strip_suffix(']')))?;
+    is_toml_key(name).then(|| dotted_key(name))
+}
+
+/// A TOML key as the messages write it: parts trimmed, quotes dropped.
+fn dotted_key(key: &str) -> String {
+    key.split('.')
+        .map(|p| p.trim().trim_matches('"'))
+        .collect::<Vec<_>>()
+        .join(".")
 }
 
 /// A scene file TOML refused: a number out of TOML's range is named by its
@@ -1037,68 +1113,70 @@ fn syntax_error(text: &str, path: &Path, e: &toml::de::Error) -> SceneError {
     let Some(value) = text.get(span.clone()) else {
         return plain();
     };
-    let Some(reason) = number_reason(e.message(), value.trim()) else {
+    let Some(reason) = number_reason(value) else {
         return plain();
     };
-    // The key: the text before `=` on the value's line, under the last
-    // table header above it.
+    // The key: a `key =` line (the value may follow it on the line, in an
+    // inline array say), under the last `[section]` header above it;
+    // inside a multi-line array the line alone names no key.
     let line_start = text[..span.start].rfind('\n').map_or(0, |i| i + 1);
     let line = &text[line_start..span.start];
     let key = line
-        .split('=')
-        .next()
-        .unwrap_or("")
-        .trim()
-        .trim_matches('"');
-    let section = text[..line_start]
-        .lines()
-        .rev()
-        .map(str::trim)
-        .find(|l| l.starts_with('['))
-        .map(|l| l.trim_matches(|c| c == '[' || c == ']').trim().to_string());
+        .split_once('=')
+        .map(|(k, _)| k)
+        .filter(|k| is_toml_key(k))
+        .map(dotted_key);
     let line_no = text[..span.start].matches('\n').count() + 1;
+    let key = match key {
+        Some(key) => match text[..line_start].lines().rev().find_map(section_header) {
+            Some(section) => format!("{section}.{key}"),
+            None => key,
+        },
+        None => format!("line {line_no}"),
+    };
     SceneError::Key {
         path: path.to_path_buf(),
-        key: match section {
-            Some(s) if !key.is_empty() => format!("{s}.{key}"),
-            _ if !key.is_empty() => key.to_string(),
-            _ => format!("line {line_no}"),
-        },
+        key,
         msg: reason,
     }
 }
 
+/// The key a `--set key=value` sets, as the scene's keys are written
+/// (`camera . fov_y` is `camera.fov_y`).
+fn override_key(arg: &str) -> String {
+    let key = arg.split_once('=').map_or(arg, |(k, _)| k);
+    key.split('.').map(str::trim).collect::<Vec<_>>().join(".")
+}
+
+/// The override that wrote `key` or a table holding it (the last one, as
+/// the last wins in the table).
+fn culprit_override<'a>(key: &str, overrides: &'a [String]) -> Option<&'a String> {
+    overrides.iter().rev().find(|o| {
+        let k = override_key(o);
+        key == k || key.starts_with(&format!("{k}.")) || key.starts_with(&format!("{k}["))
+    })
+}
+
 /// An error on a key an override set (or inside it) is the override's: it
-/// names `--set key=value` instead of the file.
-fn blame_override(e: SceneError, overrides: &[String]) -> SceneError {
+/// names `--set key=value` instead of the file. `written` is what the file
+/// and the overrides wrote ([`written_keys`]).
+fn blame_override(e: SceneError, overrides: &[String], written: &[(String, String)]) -> SceneError {
     let SceneError::Key { key, msg, path } = e else {
         return e;
     };
-    let set_key = |o: &str| -> String {
-        let k = o.split_once('=').map_or(o, |(k, _)| k);
-        k.split('.').map(str::trim).collect::<Vec<_>>().join(".")
-    };
-    // The last override of the key wins, as it does in the table.
-    let culprit = overrides.iter().rev().find(|o| {
-        let k = set_key(o);
-        key == k || key.starts_with(&format!("{k}.")) || key.starts_with(&format!("{k}["))
-    });
-    // A missing lambda is the fault of the override that chose the
-    // smoothing spline.
-    let culprit = culprit.or_else(|| {
-        (key == "surface.lambda" && msg.contains("needs lambda"))
-            .then(|| {
-                overrides
-                    .iter()
-                    .rev()
-                    .find(|o| set_key(o) == "surface.filter")
-            })
+    // A missing lambda (nobody wrote one) is the fault of the override
+    // that chose the smoothing spline.
+    let culprit = culprit_override(&key, overrides).or_else(|| {
+        let lambda_missing =
+            key == "surface.lambda" && !written.iter().any(|(k, _)| k == "surface.lambda");
+        lambda_missing
+            .then(|| culprit_override("surface.filter", overrides))
             .flatten()
     });
     match culprit {
         Some(o) => SceneError::Override {
             arg: o.clone(),
-            msg: if key == set_key(o) {
+            msg: if key == override_key(o) {
                 msg
             } else {
                 format!("[{key}] {msg}")
@@ -1159,30 +1237,22 @@ fn ignored_settings(
             "render.step",
             format!(
                 "it is the step of traversal = \"step\"; the {} traversal finds crossings cell by cell",
-                serde_name(render.traversal)
+                setting_name(&render.traversal)
             ),
         ));
     }
     if render.supersampling == Supersampling::None {
         for key in [
-            "samples",
-            "prss_samples",
-            "prss_map",
-            "prss_fallback",
-            "prss_curvature",
-            "footprint",
-            "seed",
+            "render.samples",
+            "render.prss_samples",
+            "render.prss_map",
+            "render.prss_fallback",
+            "render.prss_curvature",
+            "render.footprint",
+            "render.seed",
         ] {
             unused.push((
-                match key {
-                    "samples" => "render.samples",
-                    "prss_samples" => "render.prss_samples",
-                    "prss_map" => "render.prss_map",
-                    "prss_fallback" => "render.prss_fallback",
-                    "prss_curvature" => "render.prss_curvature",
-                    "footprint" => "render.footprint",
-                    _ => "render.seed",
-                },
+                key,
                 "render.supersampling is \"none\" (one ray per pixel); set it to grid, jitter, prss or footprint".into(),
             ));
         }
@@ -1191,7 +1261,7 @@ fn ignored_settings(
             "render.footprint",
             format!(
                 "it is the filter of supersampling = \"footprint\", not of \"{}\"",
-                serde_name(render.supersampling)
+                setting_name(&render.supersampling)
             ),
         ));
     }
@@ -1216,11 +1286,12 @@ fn ignored_settings(
         .collect()
 }
 
-/// The name serde reads and writes for a unit variant (`"octree"`).
-fn serde_name<T: serde::Serialize>(v: T) -> String {
+/// The name a setting's unit variant has in scene files and reports
+/// (`"octree"`): the one serde reads and writes.
+pub(crate) fn setting_name<T: serde::Serialize>(v: &T) -> String {
     match serde_json::to_value(v) {
         Ok(serde_json::Value::String(s)) => s,
-        _ => String::new(),
+        _ => "?".into(),
     }
 }
 
@@ -1239,15 +1310,22 @@ fn resolve(
 
     // [image]
     let (w, h) = (f.image.width, f.image.height);
-    if w == 0 || h == 0 || w > MAX_IMAGE_SIDE || h > MAX_IMAGE_SIDE {
-        return Err(bad(
-            "image",
-            format!("width and height must be from 1 to {MAX_IMAGE_SIDE}, got {w}x{h}"),
-        ));
+    for (key, side) in [("image.width", w), ("image.height", h)] {
+        if side == 0 || side > MAX_IMAGE_SIDE {
+            return Err(bad(
+                key,
+                format!("must be from 1 to {MAX_IMAGE_SIDE} pixels, got {side}"),
+            ));
+        }
     }
     if (w as u64) * (h as u64) > MAX_IMAGE_PIXELS {
+        // Named by the longer side, the one most over its share.
         return Err(bad(
-            "image",
+            if w >= h {
+                "image.width"
+            } else {
+                "image.height"
+            },
             format!("{w}x{h} exceeds {MAX_IMAGE_PIXELS} pixels"),
         ));
     }
@@ -1305,6 +1383,8 @@ fn resolve(
             }
             CameraError::BadFov(_) => "camera.fov_y".into(),
             CameraError::UpParallel => "camera.up".into(),
+            // position is where the camera is; look_at is what it aims at.
+            CameraError::NoDirection => "camera.look_at".into(),
             _ => "camera".into(),
         };
         bad(&key, e.to_string())
@@ -1379,7 +1459,10 @@ fn resolve(
         crate::filter::FilterError::BadLambda(_) => bad("surface.lambda", e.to_string()),
         crate::filter::FilterError::NeedsLambda => bad(
             "surface.lambda",
-            "filter smooth-bspline3 needs lambda, its smoothing weight (0 to 1e12, e.g. lambda = 1.0; 0 is bspline3)".into(),
+            format!(
+                "filter smooth-bspline3 needs lambda, {}",
+                crate::filter::LAMBDA_HELP
+            ),
         ),
     })?;
     if !s.iso.is_finite() {
@@ -1594,6 +1677,8 @@ fn resolve(
     let ignored = ignored_settings(written, &f, &surface, &render);
     let scene = Scene {
         ignored,
+        overrides: Vec::new(),
+        written: Vec::new(),
         path: path.to_path_buf(),
         width: w,
         height: h,
@@ -1834,38 +1919,143 @@ checker = 8.0
 
     #[test]
     fn errors_name_the_key() {
+        // Each error starts with the override that set its key (the last
+        // one given), or with [key] inside the override that caused it.
         let cases: &[(&[&str], &str)] = &[
-            (&["surface.filter=gauss"], "surface.filter"),
-            (&["surface.lambda=-2"], "surface.lambda"),
-            (&["surface.filter=smooth-bspline3"], "surface.lambda"),
-            (&["camera.look_at=[31.5, 31.5, -150.0]"], "camera"),
-            (&["camera.up=[0.0, 0.0, 1.0]"], "camera"),
-            (&["camera.fov_y=0"], "camera.fov_y"),
-            (&["image.width=0"], "image"),
-            (&["surface.isoo=3"], "surface"),
-            (&["surface.iso=\"high\""], "surface.iso"),
-            (&["backdrop.checker=0"], "backdrop.checker"),
-            (&["backdrop.u_axis=[0.0, 0.0, 2.0]"], "backdrop.u_axis"),
+            (&["surface.filter=gauss"], "--set surface.filter=gauss: "),
+            (&["surface.lambda=-2"], "--set surface.lambda=-2: "),
+            (
+                &["surface.filter=smooth-bspline3"],
+                "--set surface.filter=smooth-bspline3: [surface.lambda] ",
+            ),
+            (
+                &["camera.look_at=[31.5, 31.5, -150.0]"],
+                "--set camera.look_at=[31.5, 31.5, -150.0]: ",
+            ),
+            (
+                &["camera.up=[0.0, 0.0, 1.0]"],
+                "--set camera.up=[0.0, 0.0, 1.0]: ",
+            ),
+            (&["camera.fov_y=0"], "--set camera.fov_y=0: "),
+            (&["image.width=0"], "--set image.width=0: "),
+            (&["image.height=40000"], "--set image.height=40000: "),
+            (
+                &["image.width=20000", "image.height=20000"],
+                "--set image.width=20000: ",
+            ),
+            (&["surface.isoo=3"], "--set surface.isoo=3: "),
+            (&["surface.iso=\"high\""], "--set surface.iso=\"high\": "),
+            (&["backdrop.checker=0"], "--set backdrop.checker=0: "),
+            (
+                &["backdrop.u_axis=[0.0, 0.0, 2.0]"],
+                "--set backdrop.u_axis=[0.0, 0.0, 2.0]: ",
+            ),
             (
                 &["render.traversal=octree", "render.classify=none"],
-                "render.classify",
+                "--set render.classify=none: ",
             ),
-            (&["render.tolerance=0"], "render.tolerance"),
+            (&["render.tolerance=0"], "--set render.tolerance=0: "),
+            (
+                &["volume.phantom={kind=\"sphere\", size=0}"],
+                "--set volume.phantom={kind=\"sphere\", size=0}: [volume.phantom.size] ",
+            ),
         ];
-        for (o, key) in cases {
+        for (o, prefix) in cases {
             let e = parse(o).unwrap_err().to_string();
-            assert!(e.contains(key), "{o:?}: {e}");
-            // The override that set the key, or the file for a key it
-            // only contributed to (`camera` from `camera.look_at`).
-            assert!(
-                e.starts_with("--set ") || e.starts_with("test.toml: "),
-                "{o:?}: {e}"
-            );
+            assert!(e.starts_with(prefix), "{o:?}: {e}");
         }
+        // The same settings in the file name the file and the precise key.
+        let e = parse_text(|s| s.replace("width = 64", "width = 0"), &[])
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("test.toml: [image.width] "), "{e}");
+        let e = parse_text(
+            |s| {
+                s.replace(
+                    "look_at = [31.5, 31.5, 31.5]",
+                    "look_at = [31.5, 31.5, -150.0]",
+                )
+            },
+            &[],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("test.toml: [camera.look_at] "), "{e}");
+        // A lambda in the file is the file's fault, whoever chose the
+        // smoothing spline.
+        let e = parse_text(
+            |s| s.replace("ior = 1.5", "ior = 1.5\nlambda = -1.0"),
+            &["surface.filter=smooth-bspline3"],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.starts_with("test.toml: [surface.lambda] "), "{e}");
         let e = Scene::parse("[image\nwidth=3", Path::new("bad.toml"), &[])
             .unwrap_err()
             .to_string();
         assert!(e.contains("bad.toml") && e.contains("line"), "{e}");
+    }
+
+    /// A number TOML cannot hold is named by its key only on a `key =`
+    /// line, under a `[section]` header line (a comment may follow it);
+    /// anywhere else (inside a multi-line array) by its line.
+    #[test]
+    fn numbers_out_of_range_in_the_file_name_key_or_line() {
+        let err = |text: &str| {
+            Scene::parse(&format!("{SCENE}{text}"), Path::new("t.toml"), &[])
+                .unwrap_err()
+                .to_string()
+        };
+        let line = |e: &str| SCENE.lines().count() + e.lines().count();
+        let e = err("\n[render]  # fast\nseed = 99999999999999999999\n");
+        assert!(e.starts_with("t.toml: [render.seed] "), "{e}");
+        let e = err("\n[ render ] # [x]\n\"seed\" = -99999999999999999999 # big\n");
+        assert!(e.starts_with("t.toml: [render.seed] "), "{e}");
+        let tail = "\n[camera2]\npoints = [\n  [1, 1, 1],\n  31.5, 1e400,\n]\n";
+        let e = err(tail);
+        assert!(
+            e.starts_with(&format!("t.toml: [line {}] ", line(tail) - 1)),
+            "{e}"
+        );
+        let tail = "\n[camera2]\npoints = [\n  [1, 1, 1],\n  [1, 99999999999999999999],\n]\n";
+        let e = err(tail);
+        assert!(
+            e.starts_with(&format!("t.toml: [line {}] ", line(tail) - 1)),
+            "{e}"
+        );
+        let e = err("\n[camera2]\npoints = [1, 1e400]\n");
+        assert!(e.starts_with("t.toml: [camera2.points] "), "{e}");
+    }
+
+    /// Errors found while loading the volume name the `--set` that wrote
+    /// the key, as errors found while reading the scene do.
+    #[test]
+    fn volume_errors_name_their_override() {
+        let small = LoadOptions {
+            memory_limit: 1 << 20,
+            ..LoadOptions::default()
+        };
+        let load = |o: &[&str]| {
+            parse(o)
+                .unwrap()
+                .load_volume(&small)
+                .unwrap_err()
+                .to_string()
+        };
+        let e = load(&["volume.phantom.size=4096"]);
+        assert!(e.starts_with("--set volume.phantom.size=4096: "), "{e}");
+        let e = load(&["volume.path=x.raw"]);
+        assert!(
+            e.starts_with("--set volume.path=x.raw: ") && e.contains("[volume.raw]"),
+            "{e}"
+        );
+        // Written in the file, the file is named.
+        let e = parse_text(|s| s.replace("size = 32", "size = 4096"), &[])
+            .unwrap()
+            .load_volume(&small)
+            .unwrap_err()
+            .to_string();
+        assert!(e.starts_with("test.toml: [volume.phantom.size] "), "{e}");
     }
 
     fn parse_text(edit: impl Fn(&str) -> String, o: &[&str]) -> Result<Scene, SceneError> {
@@ -1903,21 +2093,50 @@ checker = 8.0
             file("format = \"u8\"", "format = \"u12\""),
             "test.toml: [volume.phantom.format] expected one of \"f32\", \"u8\", \"u16\", got \"u12\""
         );
-        let seed = "18446744073709551615";
-        let f = parse_text(|s| format!("{s}\n[render]\nseed = {seed}\n"), &[])
-            .unwrap_err()
-            .to_string();
-        let o = set(&format!("render.seed={seed}"));
+        // Numbers TOML cannot hold, whichever way TOML words the refusal
+        // (i64 < n <= u64, past u64, below i64, a float past f64).
+        for (seed, words) in [
+            ("18446744073709551615", "up to 9223372036854775807"),
+            ("9223372036854775808", "up to 9223372036854775807"),
+            ("99999999999999999999", "up to 9223372036854775807"),
+            (
+                "999999999999999999999999999999999999999999",
+                "up to 9223372036854775807",
+            ),
+            ("-9223372036854775809", "down to -9223372036854775808"),
+            ("-99999999999999999999", "down to -9223372036854775808"),
+            ("0xffffffffffffffffff", "up to 9223372036854775807"),
+        ] {
+            let f = parse_text(|s| format!("{s}\n[render]\nseed = {seed}\n"), &[])
+                .unwrap_err()
+                .to_string();
+            let o = set(&format!("render.seed={seed}"));
+            let f = f.strip_prefix("test.toml: [render.seed] ").expect(&f);
+            let o = o
+                .strip_prefix(&format!("--set render.seed={seed}: "))
+                .expect(&o);
+            assert_eq!(f, o);
+            assert!(f.contains(words) && f.ends_with(seed), "{f}");
+        }
+        for iso in ["1e400", "-1.5e309", "1_000e306"] {
+            let f = file("iso = 127.5", &format!("iso = {iso}"));
+            let o = set(&format!("surface.iso={iso}"));
+            let f = f.strip_prefix("test.toml: [surface.iso] ").expect(&f);
+            let o = o
+                .strip_prefix(&format!("--set surface.iso={iso}: "))
+                .expect(&o);
+            assert_eq!(f, o);
+            assert!(f.contains("beyond the largest 64-bit float"), "{f}");
+        }
+        // A word is still text.
         assert_eq!(
-            f.strip_prefix("test.toml: [render.seed] "),
-            o.strip_prefix(&format!("--set render.seed={seed}: "))
+            set("surface.iso=infinity"),
+            "--set surface.iso=infinity: expected a number, got the text \"infinity\""
         );
-        assert!(f.contains("up to 9223372036854775807"), "{f}");
-        let f = file("iso = 127.5", "iso = 1e400");
-        let o = set("surface.iso=1e400");
+        // Two variants: "a" or "b", in quotes as the values are written.
         assert_eq!(
-            f.strip_prefix("test.toml: [surface.iso] "),
-            o.strip_prefix("--set surface.iso=1e400: ")
+            set("camera.kind=fisheye"),
+            "--set camera.kind=fisheye: expected \"perspective\" or \"orthographic\", got \"fisheye\""
         );
         let e = set("volume.phantom.radius=-20");
         assert_eq!(
@@ -1969,6 +2188,15 @@ checker = 8.0
         assert!(
             ignored[0].starts_with("--set camera.height=3 is ignored"),
             "{ignored:?}"
+        );
+        // A key inside a table an override wrote is that override's, as
+        // in errors.
+        let s = parse(&["render={seed=7}"]).unwrap();
+        assert_eq!(
+            s.ignored_settings(),
+            [
+                "--set render={seed=7} is ignored: render.supersampling is \"none\" (one ray per pixel); set it to grid, jitter, prss or footprint"
+            ]
         );
         // In the file, named by its key.
         let s = parse_text(
