@@ -97,13 +97,11 @@ fn phantom_size(s: &str) -> Result<usize, String> {
         .trim()
         .parse()
         .map_err(|_| format!("expected a whole number from 1 to {MAX_PHANTOM_SIZE}, got '{s}'"))?;
-    if (1..=MAX_PHANTOM_SIZE).contains(&n) {
-        Ok(n)
-    } else {
-        Err(format!(
-            "must be from 1 to {MAX_PHANTOM_SIZE} samples, got {n}"
-        ))
-    }
+    snell::phantom::check_size(n).map_err(|e| match e {
+        PhantomError::Setting { msg, .. } => msg,
+        e => e.to_string(),
+    })?;
+    Ok(n)
 }
 
 /// A phantom's error with its setting named as the option that sets it.

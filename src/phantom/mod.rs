@@ -28,7 +28,8 @@ fn setting(key: &'static str, msg: String) -> PhantomError {
     PhantomError::Setting { key, msg }
 }
 
-fn check_size(size: usize) -> Result<(), PhantomError> {
+/// A side from 1 to [`MAX_PHANTOM_SIZE`] samples.
+pub fn check_size(size: usize) -> Result<(), PhantomError> {
     if size == 0 || size > MAX_PHANTOM_SIZE {
         return Err(setting(
             "size",
