@@ -113,11 +113,11 @@ impl Method {
         }
     }
 
-    /// The methods `snell classify` reports, coarse to fine.
     /// The names [`Method::parse`] accepts, for help and messages.
     pub const NAMES: &'static str =
         "bmcc, accc, accc2, accc4, accc8, bezier (= bezier2), bezier0, bezier1, bezier3, exact";
 
+    /// The methods `snell classify` reports, coarse to fine.
     pub fn all() -> [Method; 8] {
         [
             Method::Bmcc,
