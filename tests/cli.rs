@@ -895,6 +895,21 @@ fn first_use_messages_warnings_and_help() {
             "{key}: {e}"
         );
     }
+    // Every command that reads a scene says so alike.
+    let hits = t.path("ref.exr");
+    let o = bin()
+        .args(["reference", SPHERE, "--hits", hits.to_str().unwrap()])
+        .args(small.iter().filter(|a| **a != "-q"))
+        .args(["--set", "render.step=0.5"])
+        .current_dir(root())
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(
+        stderr(&o).contains("warning: scenes/sphere.toml: --set render.step=0.5"),
+        "{}",
+        stderr(&o)
+    );
     // The same settings used: no warning.
     let e = render(&[
         "--set",

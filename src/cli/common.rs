@@ -202,6 +202,17 @@ pub fn filter_kind(filter: &str, lambda: Option<f64>) -> anyhow::Result<FilterKi
     Ok(kind)
 }
 
+/// A scene file with its `--set` overrides, the settings it wrote but does
+/// not use each said in a warning (a `render.step` under an octree, say):
+/// every command that reads a scene names them alike.
+pub fn load_scene(path: &Path, sets: &[String]) -> anyhow::Result<snell::scene::Scene> {
+    let scene = snell::scene::Scene::load(path, sets)?;
+    for w in scene.ignored_settings() {
+        eprintln!("warning: {}: {w}", path.display());
+    }
+    Ok(scene)
+}
+
 /// Most worker threads a command starts: far above any core count snell
 /// could use, and low enough that a typo is refused at once instead of
 /// spawning threads until the system refuses.

@@ -9,10 +9,9 @@ use clap::Args as ClapArgs;
 use snell::human::{exact, num};
 use snell::peer::povray::{self, PovOptions, Variant};
 use snell::peer::{Interpolation, PeerError};
-use snell::scene::Scene;
 use snell::volume::LoadOptions;
 
-use super::common::{check_distinct, check_output};
+use super::common::{check_distinct, check_output, load_scene};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -48,7 +47,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let scene = Scene::load(&a.scene, &a.set)?;
+    let scene = load_scene(&a.scene, &a.set)?;
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));

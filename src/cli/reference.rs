@@ -5,9 +5,8 @@ use std::path::PathBuf;
 use clap::Args as ClapArgs;
 
 use snell::reference::Reference;
-use snell::scene::Scene;
 
-use super::common::{check_distinct, check_format, check_output, given};
+use super::common::{check_distinct, check_format, check_output, given, load_scene};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -25,7 +24,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let scene = Scene::load(&a.scene, &a.set)?;
+    let scene = load_scene(&a.scene, &a.set)?;
     check_output(&a.hits)?;
     check_format(&a.hits, "--hits", &["exr"])?;
     if let Some(o) = &a.output {

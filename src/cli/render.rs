@@ -9,10 +9,9 @@ use anyhow::Context;
 use clap::Args as ClapArgs;
 
 use snell::render::{self, Prepared};
-use snell::scene::Scene;
 use snell::volume::LoadOptions;
 
-use super::common::{check_distinct, check_format, check_output, given};
+use super::common::{check_distinct, check_format, check_output, given, load_scene};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -70,10 +69,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         // SAFETY: at start-up, before this process starts any other thread.
         unsafe { std::env::set_var("SNELL_MEMORY_LIMIT", s) };
     }
-    let scene = Scene::load(&a.scene, &a.set)?;
-    for w in scene.ignored_settings() {
-        eprintln!("warning: {}: {w}", a.scene.display());
-    }
+    let scene = load_scene(&a.scene, &a.set)?;
     let outputs = given(&[
         Some(&a.output),
         a.hits.as_ref(),
