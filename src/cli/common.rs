@@ -46,19 +46,6 @@ fn byte_offset(s: &str) -> Result<u64, String> {
     })
 }
 
-/// The volume formats known by their file names; anything else is read as
-/// headerless raw (with `--dims` and `--type`).
-fn named_format(path: &Path) -> Option<&'static str> {
-    let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
-    if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
-        Some("a NRRD file")
-    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-        Some("a NIfTI-1 file")
-    } else {
-        None
-    }
-}
-
 /// `--memory-limit`, or the default limit.
 pub fn memory_limit(arg: Option<&str>) -> anyhow::Result<u64> {
     Ok(match arg {
@@ -93,7 +80,7 @@ impl VolumeArgs {
     /// for a file whose name says its format (its header gives its layout).
     pub fn load_options(&self, path: &Path) -> anyhow::Result<LoadOptions> {
         let memory_limit = memory_limit(self.memory_limit.as_deref())?;
-        if let Some(format) = named_format(path) {
+        if let Some(format) = volume::Format::of(path) {
             let given: Vec<&str> = [
                 ("--dims", self.dims.is_some()),
                 ("--type", self.sample_type.is_some()),
@@ -105,10 +92,11 @@ impl VolumeArgs {
             .collect();
             if !given.is_empty() {
                 bail!(
-                    "{}: {} {} only to headerless raw volumes (named .raw or without a known extension); this is {format}, whose header gives its layout",
+                    "{}: {} {} only to headerless raw volumes (named .raw or without a known extension); this is {}, whose header gives its layout",
                     path.display(),
                     given.join(", "),
-                    if given.len() == 1 { "applies" } else { "apply" }
+                    if given.len() == 1 { "applies" } else { "apply" },
+                    format.describe()
                 );
             }
         }

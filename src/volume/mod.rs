@@ -553,18 +553,43 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     if let Some(spec) = &opts.raw {
         return raw::read(path, spec, opts);
     }
-    let name = path
-        .file_name()
-        .map(|n| n.to_string_lossy().to_ascii_lowercase())
-        .unwrap_or_default();
-    if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
-        nrrd::read(path, opts)
-    } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
-        nifti::read(path, opts)
-    } else {
-        Err(VolumeError::UnknownFormat {
+    match Format::of(path) {
+        Some(Format::Nrrd) => nrrd::read(path, opts),
+        Some(Format::Nifti) => nifti::read(path, opts),
+        None => Err(VolumeError::UnknownFormat {
             path: path.to_path_buf(),
-        })
+        }),
+    }
+}
+
+/// The volume formats [`load`] knows by their file names (anything else
+/// needs a raw layout).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Format {
+    /// `.nrrd`, `.nhdr`
+    Nrrd,
+    /// `.nii`, `.nii.gz`
+    Nifti,
+}
+
+impl Format {
+    pub fn of(path: &Path) -> Option<Format> {
+        let name = path.file_name()?.to_string_lossy().to_ascii_lowercase();
+        if name.ends_with(".nrrd") || name.ends_with(".nhdr") {
+            Some(Format::Nrrd)
+        } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
+            Some(Format::Nifti)
+        } else {
+            None
+        }
+    }
+
+    /// As a message names it: "a NRRD file".
+    pub fn describe(self) -> &'static str {
+        match self {
+            Format::Nrrd => "a NRRD file",
+            Format::Nifti => "a NIfTI-1 file",
+        }
     }
 }
 

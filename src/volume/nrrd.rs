@@ -455,19 +455,7 @@ fn parse_line(
             })?;
             set_once(&mut fields.sample_type, ty, &bad)
         }
-        "dimension" => {
-            let d = value
-                .parse::<usize>()
-                .ok()
-                .filter(|d| (1..=MAX_DIMENSION).contains(d))
-                .ok_or_else(|| {
-                    bad(format!(
-                        "'{}' is not a dimension from 1 to {MAX_DIMENSION}",
-                        excerpt(value)
-                    ))
-                })?;
-            set_once(&mut fields.dimension, d, &bad)
-        }
+        "dimension" => set_once(&mut fields.dimension, parse_dimension(value, &bad)?, &bad),
         "sizes" => {
             let sizes = parse_list(value, |s| s.parse::<usize>().ok())
                 .map_err(|tok| bad(format!("'{}' is not a size", excerpt(&tok))))?;
@@ -529,19 +517,11 @@ fn parse_line(
             let kinds = value.split_whitespace().map(str::to_string).collect();
             set_once(&mut fields.kinds, kinds, &bad)
         }
-        "space dimension" | "spacedimension" => {
-            let d = value
-                .parse::<usize>()
-                .ok()
-                .filter(|d| (1..=MAX_DIMENSION).contains(d))
-                .ok_or_else(|| {
-                    bad(format!(
-                        "'{}' is not a dimension from 1 to {MAX_DIMENSION}",
-                        excerpt(value)
-                    ))
-                })?;
-            set_once(&mut fields.space_dimension, d, &bad)
-        }
+        "space dimension" | "spacedimension" => set_once(
+            &mut fields.space_dimension,
+            parse_dimension(value, &bad)?,
+            &bad,
+        ),
         "space" => {
             let d = space_dimension(value)
                 .ok_or_else(|| bad(format!("unknown space '{}'", excerpt(value))))?;
@@ -560,6 +540,20 @@ fn parse_line(
             excerpt(name.trim())
         ))),
     }
+}
+
+/// A `dimension` or `space dimension` value: 1 to [`MAX_DIMENSION`].
+fn parse_dimension(value: &str, bad: &dyn Fn(String) -> VolumeError) -> Result<usize, VolumeError> {
+    value
+        .parse::<usize>()
+        .ok()
+        .filter(|d| (1..=MAX_DIMENSION).contains(d))
+        .ok_or_else(|| {
+            bad(format!(
+                "'{}' is not a dimension from 1 to {MAX_DIMENSION}",
+                excerpt(value)
+            ))
+        })
 }
 
 /// The dimension of one of teem's named spaces (`space: LPS`, ...).
