@@ -704,7 +704,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "classify --methods unknown", "classify {tooth} --filter linear --iso 100 --methods foo", &["'foo'", "bezier0", "exact"]),
         bad("flag", "compare --checker negative", "compare k0.exr k0.exr --checker -1", &["--checker", "-1"]),
         bad("flag", "info --offset negative", "info r.raw --dims 2,2,2 --type u8 --offset -1", &["--offset", "whole number of bytes"]),
-        bad("flag", "info --spacing negative", "info r.raw --dims 2,2,2 --type u8 --spacing -1,1,1", &["r.raw", "--spacing -1,1,1", "> 0"]),
+        bad("flag", "info --spacing negative", "info r.raw --dims 2,2,2 --type u8 --spacing -1,1,1", &["r.raw", "--spacing", "got -1, 1, 1", "> 0"]),
         bad("flag", "phantom --radius negative", "phantom sphere --radius -3 -o p.nrrd", &["--radius", "-3"]),
         bad("flag", "--endian of a NRRD file", "info {tooth} --endian big", &["tooth.nrrd", "--endian applies only to headerless raw"]),
         bad("flag", "--offset of a NRRD file", "info {tooth} --offset 100", &["tooth.nrrd", "--offset applies only to headerless raw"]),

@@ -142,6 +142,23 @@ fn frac(n: usize, of: usize) -> f64 {
     n as f64 / of.max(1) as f64
 }
 
+/// A thin shell seen through its middle with the scene's traversal and a
+/// dense step (0.01) on the same volume: at least a quarter of the pixels
+/// must cross both of the shell's walls going in and again going out (4+
+/// events), and the two renders must agree on the events of 99% of the
+/// pixels.
+fn shell_walls_found(vol: impl Fn() -> Volume, set: &[&str]) -> String {
+    let dda = render(&sphere(48, set), Some(vol()));
+    let dense = [set, &["render.traversal=step", "render.step=0.01"]].concat();
+    let step = render(&sphere(48, &dense), Some(vol()));
+    let m = dda.film.events.len();
+    let through = dda.film.events.iter().filter(|&&e| e >= 4.0).count();
+    let d = events_differ(&dda, &step);
+    assert!(through > m / 4, "{through}");
+    assert!(frac(d, m) <= 0.01, "{d}");
+    format!("{through} of {m} pixels cross 4+ times; dda vs step differ on {d}")
+}
+
 type Case = (&'static str, &'static str, fn() -> String);
 
 /// Every case: name, expected outcome, and the check (which asserts the
@@ -310,20 +327,7 @@ fn cases() -> Vec<Case> {
                     &["surface.filter=linear", "surface.iso=127.5"],
                 ]
                 .concat();
-                let dda = render(&sphere(48, &set), Some(vol()));
-                let step = render(
-                    &sphere(
-                        48,
-                        &[&set[..], &["render.traversal=step", "render.step=0.01"]].concat(),
-                    ),
-                    Some(vol()),
-                );
-                let m = dda.film.events.len();
-                let through = dda.film.events.iter().filter(|&&e| e >= 4.0).count();
-                let d = events_differ(&dda, &step);
-                assert!(through > m / 4, "{through}");
-                assert!(frac(d, m) <= 0.01, "{d}");
-                format!("{through} of {m} pixels cross 4+ times; dda vs step differ on {d}")
+                shell_walls_found(vol, &set)
             },
         ),
         (
@@ -332,20 +336,7 @@ fn cases() -> Vec<Case> {
             || {
                 let vol = || shell(|d| (-d * d / (2.0 * 0.25)).exp());
                 let set = [&SHELL_VIEW[..], &["surface.iso=0.8"]].concat();
-                let dda = render(&sphere(48, &set), Some(vol()));
-                let step = render(
-                    &sphere(
-                        48,
-                        &[&set[..], &["render.traversal=step", "render.step=0.01"]].concat(),
-                    ),
-                    Some(vol()),
-                );
-                let m = dda.film.events.len();
-                let through = dda.film.events.iter().filter(|&&e| e >= 4.0).count();
-                let d = events_differ(&dda, &step);
-                assert!(through > m / 4, "{through}");
-                assert!(frac(d, m) <= 0.01, "{d}");
-                format!("{through} of {m} pixels cross 4+ times; dda vs step differ on {d}")
+                shell_walls_found(vol, &set)
             },
         ),
         (

@@ -103,12 +103,9 @@ impl VolumeArgs {
         let spacing = match &self.spacing {
             Some(s) => {
                 let sp = triple::<f64>(s, "--spacing")?;
-                if !sp.iter().all(|x| x.is_finite() && *x > 0.0) {
-                    bail!(
-                        "{}: --spacing {s}: each value must be a finite number > 0",
-                        path.display()
-                    );
-                }
+                // The message gives the values.
+                volume::check_spacing(sp)
+                    .with_context(|| format!("{}: --spacing", path.display()))?;
                 Some(sp)
             }
             None => None,

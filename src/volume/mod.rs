@@ -354,14 +354,22 @@ impl WordHash {
     }
 }
 
-pub(crate) fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
+/// Refuses a spacing that is not finite and positive on every axis, with
+/// the values as people write them (the CLI's `--spacing` and the scene's
+/// `volume.spacing` report this message under their own names).
+pub fn check_spacing(spacing: [f64; 3]) -> Result<(), VolumeError> {
     if spacing.iter().any(|s| !s.is_finite() || *s <= 0.0) {
         return Err(VolumeError::Invalid(format!(
-            "spacing {:?} must be finite and positive",
-            spacing
+            "each spacing must be a finite number > 0, got {}",
+            human_triple(spacing)
         )));
     }
     Ok(())
+}
+
+/// `1, 0.5, 2`: a spacing as people write it.
+fn human_triple(v: [f64; 3]) -> String {
+    v.map(crate::human::num).join(", ")
 }
 
 /// Refuses a spacing whose domain overflows: `(n − 1) × spacing` along an
@@ -397,7 +405,8 @@ pub fn check_spacing_ratio(spacing: [f64; 3]) -> Result<(), VolumeError> {
         });
     if hi > MAX_SPACING_RATIO * lo {
         return Err(VolumeError::Invalid(format!(
-            "spacing {spacing:?}: its axes differ by more than a factor {MAX_SPACING_RATIO:e}"
+            "spacing {}: its axes differ by more than a factor {MAX_SPACING_RATIO:e}",
+            human_triple(spacing)
         )));
     }
     Ok(())
