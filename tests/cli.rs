@@ -676,6 +676,11 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "--region outside the image", "render {sphere} -o out.png --region 500,0,513,10", &["--region", "X1 <= 512"]),
         bad("flag", "--region empty", "render {sphere} -o out.png --region 10,10,10,20", &["--region", "X0 < X1"]),
         bad("flag", "--region not four numbers", "render {sphere} -o out.png --region 1,2,-3,4", &["--region '1,2,-3,4'"]),
+        bad("flag", "--orbit without a frame number", "render {sphere} -o out.png --orbit 8", &["-o out.png", "--orbit", "%03d"]),
+        bad("flag", "--orbit with a bad frame number", "render {sphere} -o f%3d.png --orbit 8", &["%0Nd", "got %3d"]),
+        bad("flag", "--orbit patterns meeting", "render {sphere} -o f%d.png --hits h%d.exr --exr h%02d.exr --orbit 12", &["--hits h%d.exr (frame 10)", "--exr h%02d.exr (frame 10)", "h10.exr"]),
+        bad("flag", "--orbit with --trace", "render {sphere} -o f%d.png --orbit 8 --trace t.json", &["--trace", "--orbit"]),
+        bad("flag", "--orbit 0", "render {sphere} -o f%d.png --orbit 0", &["--orbit", "1..=3600"]),
         bad("file", "merge: a part that is not an EXR", "merge empty.nrrd -o out.exr", &["empty.nrrd", "OpenEXR"]),
         bad("flag", "--threads 0", "render {sphere} -o out.png --threads 0", &["--threads"]),
         bad("flag", "--threads not a number", "render {sphere} -o out.png --threads two", &["--threads", "two"]),
@@ -1163,6 +1168,89 @@ fn hits_are_bitwise_identical_across_threads_and_tiles() {
     for (name, hits, png) in &outputs[1..] {
         assert!(hits == hits1, "{name}: hit EXR differs from --threads 1");
         assert!(png == png1, "{name}: PNG differs from --threads 1");
+    }
+}
+
+/// `render --orbit 8` writes every frame under its pattern's names and
+/// times them in `--stats`; frame 0 is the plain render bit for bit; the
+/// quarter turns see the sphere phantom exactly as frame 0 does (its grid
+/// maps onto itself under a quarter turn about its centre, and the camera
+/// and backdrop turn together), while the 45° frames, across the grid's
+/// diagonals, do not.
+#[test]
+fn orbit_turns_the_view_about_the_volume() {
+    let t = Tmp::new("orbit");
+    let sphere = root().join(SPHERE);
+    let sphere = sphere.to_str().unwrap();
+    let size = ["--set", "image.width=64", "--set", "image.height=48"];
+    let pattern = |name: &str| t.path(name).to_str().unwrap().to_string();
+    let (png, hits, stats) = (
+        pattern("f-%02d.png"),
+        pattern("h-%02d.exr"),
+        pattern("s.json"),
+    );
+    let o = run(&[
+        &[
+            "render", sphere, "-o", &png, "--hits", &hits, "--stats", &stats, "--orbit", "8",
+        ][..],
+        &size[..],
+    ]
+    .concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let err = stderr(&o);
+    assert!(err.contains("frame 2 at 90°"), "{err}");
+    assert!(err.contains("8 frames: median"), "{err}");
+    for k in 0..8 {
+        assert!(t.path(&format!("f-{k:02}.png")).is_file(), "frame {k}");
+    }
+    let s: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(t.path("s.json")).unwrap()).unwrap();
+    assert_eq!(s["orbit"]["frames"], 8);
+    assert_eq!(s["orbit"]["frame_ms"].as_array().unwrap().len(), 8);
+
+    let plain = t.path("plain.exr");
+    let o = run(&[
+        &[
+            "render",
+            sphere,
+            "-q",
+            "-o",
+            &pattern("plain.png"),
+            "--hits",
+            plain.to_str().unwrap(),
+        ][..],
+        &size[..],
+    ]
+    .concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let read = |p: &Path| snell::film::HitImage::read_exr(p).unwrap();
+    let frame = |k: usize| read(&t.path(&format!("h-{k:02}.exr")));
+    let f0 = frame(0);
+    assert_eq!(
+        std::fs::read(t.path("h-00.exr")).unwrap(),
+        std::fs::read(&plain).unwrap(),
+        "frame 0 is the plain render"
+    );
+    let refracted = f0.events.iter().filter(|&&e| e >= 2.0).count();
+    assert!(refracted > 500, "{refracted}");
+    let differing = |f: &snell::film::HitImage| {
+        (0..f0.events.len())
+            .filter(|&i| {
+                f.events[i] != f0.events[i]
+                    || (f.u[i] - f0.u[i]).abs() > 1e-3
+                    || (f.v[i] - f0.v[i]).abs() > 1e-3
+            })
+            .count()
+    };
+    for k in [2, 4, 6] {
+        assert_eq!(differing(&frame(k)), 0, "quarter turn {k}");
+    }
+    for k in [1, 3, 5, 7] {
+        let d = differing(&frame(k));
+        assert!(
+            d > 20,
+            "the 45° frame {k} differs from frame 0 on only {d} pixels"
+        );
     }
 }
 

@@ -278,7 +278,8 @@ pub fn check_distinct(outputs: &[&Path], inputs: &[&Path]) -> anyhow::Result<()>
         })
     };
     let ins: Vec<PathBuf> = inputs.iter().map(|p| identity(p)).collect();
-    let mut seen: Vec<(PathBuf, &Path)> = Vec::new();
+    // By name, so an orbit's thousands of frame files check in linear time.
+    let mut seen: std::collections::HashMap<PathBuf, &Path> = std::collections::HashMap::new();
     for &o in outputs {
         let id = identity(o);
         if let Some(k) = ins.iter().position(|i| *i == id) {
@@ -288,14 +289,14 @@ pub fn check_distinct(outputs: &[&Path], inputs: &[&Path]) -> anyhow::Result<()>
                 inputs[k].display()
             );
         }
-        if let Some((_, first)) = seen.iter().find(|(s, _)| *s == id) {
+        if let Some(first) = seen.get(&id) {
             bail!(
                 "{} and {} name the same file; give each output its own name",
                 first.display(),
                 o.display()
             );
         }
-        seen.push((id, o));
+        seen.insert(id, o);
     }
     Ok(())
 }

@@ -1,6 +1,7 @@
 //! `snell render`: a scene file to images, hit positions and a profile.
 
-use std::path::PathBuf;
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::time::{Duration, Instant};
@@ -9,9 +10,10 @@ use anyhow::Context;
 use clap::Args as ClapArgs;
 
 use snell::render::{self, Prepared};
+use snell::scene::{Orbit, Scene};
 use snell::volume::LoadOptions;
 
-use super::common::{check_distinct, check_format, check_output, given, load_scene};
+use super::common::{check_distinct, check_format, check_output, load_scene};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -56,6 +58,14 @@ pub struct Args {
     /// available memory).
     #[arg(long, value_name = "BYTES", allow_hyphen_values = true)]
     pub memory_limit: Option<String>,
+    /// Render a turntable of N frames: the camera and the backdrop go round
+    /// the volume's centre about the image's vertical axis, 360°/N a frame,
+    /// as if the volume turned on a turntable; the preparation is made once.
+    /// The output names carry the frame number as printf does, e.g.
+    /// -o frames/f-%03d.png (and --hits, --exr likewise); each frame's time is
+    /// printed, then the median (steady state: structures cached).
+    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=snell::scene::orbit::MAX_FRAMES as i64))]
+    pub orbit: Option<u32>,
     /// Do not print the stats table.
     #[arg(short, long)]
     pub quiet: bool,
@@ -70,24 +80,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         unsafe { std::env::set_var("SNELL_MEMORY_LIMIT", s) };
     }
     let scene = load_scene(&a.scene, &a.set)?;
-    let outputs = given(&[
-        Some(&a.output),
-        a.hits.as_ref(),
-        a.exr.as_ref(),
-        a.stats.as_ref(),
-        a.trace.as_ref(),
-    ]);
-    for p in &outputs {
-        check_output(p)?;
-    }
-    check_format(&a.output, "-o", &["png"])?;
-    if let Some(h) = &a.hits {
-        check_format(h, "--hits", &["exr"])?;
-    }
-    if let Some(e) = &a.exr {
-        check_format(e, "--exr", &["exr"])?;
-    }
-    check_distinct(&outputs, &scene.input_files())?;
+    let outputs = Outputs::of(&a)?;
+    let files = outputs.all_of(&a);
+    check_distinct(
+        &files.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
+        &scene.input_files(),
+    )?;
     let window = a
         .region
         .as_deref()
@@ -108,6 +106,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         snell::volume::limits::default_memory_limit(),
         pool.current_num_threads().min(tiles.max(1)),
     )?;
+    if a.orbit.is_some() {
+        // Each frame reuses the memory of the last, as an interactive
+        // session's would.
+        snell::heap::retain_freed_memory();
+    }
 
     let mut trace = a.trace.as_ref().map(|_| render::Trace::new());
     let prep_start = Instant::now();
@@ -137,63 +140,371 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.scene.display()
         );
     }
-    let done = AtomicUsize::new(0);
-    let (finished, ended) = mpsc::channel::<()>();
-    let frame = std::thread::scope(|s| {
-        // The render runs inside the pool, so --threads sets its tile workers.
-        let worker = s.spawn(|| {
-            let frame = pool.install(|| match (window, &mut trace) {
-                (Some(w), t) => render::render_window(&scene, &prep, w, Some(&done), t.as_mut()),
-                (None, Some(t)) => render::render_traced(&scene, &prep, Some(&done), t),
-                (None, None) => render::render(&scene, &prep, Some(&done)),
-            });
-            // Wakes the progress loop now rather than at its next tick.
-            let _ = finished.send(());
-            frame
-        });
-        progress_bar(&done, tiles, &worker, &ended);
-        worker.join().expect("render thread panicked")
-    });
+    let renderer = Renderer {
+        pool: &pool,
+        prep: &prep,
+        window,
+        tiles,
+    };
+    match a.orbit {
+        None => render_one(&a, &scene, &renderer, &outputs, trace),
+        Some(n) => render_orbit(&a, scene, &renderer, &outputs, n),
+    }
+}
 
-    frame.film.write_png(&a.output)?;
-    if let Some(p) = &a.hits {
-        frame.film.write_hits_exr(p)?;
-    }
-    if let Some(p) = &a.exr {
-        frame.film.write_color_exr(p)?;
-    }
-    // The whole process's peak (volume, coefficients, structures, film):
-    // what a large volume needs of the machine.
-    let peak_mib = snell::bench::machine::peak_rss_mib();
-    if let Some(p) = &a.stats {
-        let mut j = frame.stats.to_json();
-        j["peak_rss_mib"] = serde_json::json!(peak_mib);
-        j["scene"] = serde_json::json!(a.scene.display().to_string());
-        j["settings"] = serde_json::to_value(scene.render)?;
-        j["filter"] = serde_json::json!(scene.surface.filter.to_string());
-        snell::atomic::write_atomic(p, |w| {
-            use std::io::Write;
-            serde_json::to_writer_pretty(&mut *w, &j)?;
-            w.write_all(b"\n")
+/// What every frame of a run shares: the worker pool, the preparation, and
+/// the part of the image to trace.
+struct Renderer<'a> {
+    pool: &'a rayon::ThreadPool,
+    prep: &'a Prepared,
+    window: Option<render::tile::Tile>,
+    tiles: usize,
+}
+
+impl Renderer<'_> {
+    /// One frame of `scene`, in the pool (so --threads sets its tile
+    /// workers), with a progress bar once it has run for a second.
+    fn frame(&self, scene: &Scene, trace: Option<&mut render::Trace>) -> render::Frame {
+        let done = AtomicUsize::new(0);
+        let (finished, ended) = mpsc::channel::<()>();
+        std::thread::scope(|s| {
+            let worker = s.spawn(|| {
+                let frame = self.pool.install(|| match (self.window, trace) {
+                    (Some(w), t) => render::render_window(scene, self.prep, w, Some(&done), t),
+                    (None, Some(t)) => render::render_traced(scene, self.prep, Some(&done), t),
+                    (None, None) => render::render(scene, self.prep, Some(&done)),
+                });
+                // Wakes the progress loop now rather than at its next tick.
+                let _ = finished.send(());
+                frame
+            });
+            progress_bar(&done, self.tiles, &worker, &ended);
+            worker.join().expect("render thread panicked")
         })
-        .with_context(|| p.display().to_string())?;
+    }
+}
+
+/// The scene's one frame, its files, stats and timeline.
+fn render_one(
+    a: &Args,
+    scene: &Scene,
+    renderer: &Renderer,
+    outputs: &Outputs,
+    mut trace: Option<render::Trace>,
+) -> anyhow::Result<()> {
+    let frame = renderer.frame(scene, trace.as_mut());
+    outputs.write(&frame, None)?;
+    if let Some(p) = &a.stats {
+        write_stats(p, &stats_json(a, scene, &frame.stats)?)?;
     }
     if let (Some(p), Some(t)) = (&a.trace, &trace) {
         t.write(p).with_context(|| p.display().to_string())?;
     }
-    if frame.stats.counters.undefined > 0 {
-        eprintln!(
-            "warning: {} rays ended in an undefined state (reported as background)",
-            frame.stats.counters.undefined
-        );
-    }
+    warn_undefined(&frame, None);
     if !a.quiet {
-        eprint!("{}", frame.stats.table());
-        if let Some(m) = peak_mib {
-            eprintln!("peak memory: {} resident", super::common::human_mib(m));
-        }
+        print_table(&frame.stats);
     }
     Ok(())
+}
+
+/// `--orbit N`: the frames of a turn, each written as it is done, each
+/// one's time printed; then the median and the median frame's table.
+/// Frame times leave out writing the files.
+fn render_orbit(
+    a: &Args,
+    mut scene: Scene,
+    renderer: &Renderer,
+    outputs: &Outputs,
+    n: u32,
+) -> anyhow::Result<()> {
+    let orbit = Orbit::about_volume(&scene, renderer.prep.volume.extent(), n)?;
+    let mut runs: Vec<(f64, render::RenderStats)> = Vec::with_capacity(n as usize);
+    for k in 0..n {
+        orbit.place(&mut scene, k);
+        let start = Instant::now();
+        let frame = renderer.frame(&scene, None);
+        let ms = start.elapsed().as_secs_f64() * 1e3;
+        outputs.write(&frame, Some(k))?;
+        if !a.quiet {
+            eprintln!(
+                "frame {k} at {}°: {ms:.1} ms, {}",
+                snell::human::num(orbit.degrees(k)),
+                outputs.png.name(Some(k)).display()
+            );
+        }
+        warn_undefined(&frame, Some(k));
+        runs.push((ms, frame.stats));
+    }
+    let times: Vec<f64> = runs.iter().map(|r| r.0).collect();
+    runs.sort_by(|x, y| x.0.total_cmp(&y.0));
+    let (median, stats) = &runs[runs.len() / 2];
+    let (min, max) = (runs[0].0, runs[runs.len() - 1].0);
+    if let Some(p) = &a.stats {
+        let mut j = stats_json(a, &scene, stats)?;
+        j["orbit"] = serde_json::json!({
+            "frames": n,
+            "frame_ms": times,
+            "median_ms": median,
+            "min_ms": min,
+            "max_ms": max,
+        });
+        write_stats(p, &j)?;
+    }
+    if !a.quiet {
+        eprintln!(
+            "{n} frames: median {median:.1} ms (min {min:.1}, max {max:.1}), {:.1} frames a second, writing the files not included; the median frame:",
+            1e3 / median
+        );
+        print_table(stats);
+    }
+    Ok(())
+}
+
+/// Warns of rays that ended undefined (frame `k` of an orbit).
+fn warn_undefined(frame: &render::Frame, k: Option<u32>) {
+    let n = frame.stats.counters.undefined;
+    if n > 0 {
+        let which = k.map_or(String::new(), |k| format!("frame {k}: "));
+        eprintln!("warning: {which}{n} rays ended in an undefined state (reported as background)");
+    }
+}
+
+/// The stats table and the process's peak memory (volume, coefficients,
+/// structures, film): what a large volume needs of the machine.
+fn print_table(stats: &render::RenderStats) {
+    eprint!("{}", stats.table());
+    if let Some(m) = snell::bench::machine::peak_rss_mib() {
+        eprintln!("peak memory: {} resident", super::common::human_mib(m));
+    }
+}
+
+/// A frame's stats as `--stats` writes them, with the scene's settings.
+fn stats_json(
+    a: &Args,
+    scene: &Scene,
+    stats: &render::RenderStats,
+) -> anyhow::Result<serde_json::Value> {
+    let mut j = stats.to_json();
+    j["peak_rss_mib"] = serde_json::json!(snell::bench::machine::peak_rss_mib());
+    j["scene"] = serde_json::json!(a.scene.display().to_string());
+    j["settings"] = serde_json::to_value(scene.render)?;
+    j["filter"] = serde_json::json!(scene.surface.filter.to_string());
+    Ok(j)
+}
+
+fn write_stats(p: &Path, j: &serde_json::Value) -> anyhow::Result<()> {
+    snell::atomic::write_atomic(p, |w| {
+        use std::io::Write;
+        serde_json::to_writer_pretty(&mut *w, j)?;
+        w.write_all(b"\n")
+    })
+    .with_context(|| p.display().to_string())
+}
+
+/// The image outputs of a render: one file each, or with `--orbit` a name
+/// pattern each (`f-%03d.png`) for the frames.
+struct Outputs {
+    png: Output,
+    hits: Option<Output>,
+    exr: Option<Output>,
+}
+
+/// One image output's file, or its frames' pattern.
+struct Output {
+    path: PathBuf,
+    pattern: Option<FramePattern>,
+}
+
+impl Output {
+    fn new(path: &Path, flag: &str, formats: &[&str], orbit: Option<u32>) -> anyhow::Result<Self> {
+        check_format(path, flag, formats)?;
+        let pattern = match orbit {
+            Some(_) => Some(
+                FramePattern::parse(path)
+                    .with_context(|| format!("{flag} {}: with --orbit", path.display()))?,
+            ),
+            None => None,
+        };
+        Ok(Output {
+            path: path.to_path_buf(),
+            pattern,
+        })
+    }
+
+    /// The file of frame `k` (of the one image without `--orbit`).
+    fn name(&self, k: Option<u32>) -> PathBuf {
+        match (&self.pattern, k) {
+            (Some(p), Some(k)) => p.name(k),
+            _ => self.path.clone(),
+        }
+    }
+}
+
+impl Outputs {
+    /// The outputs `a` names, checked: writable places, formats, frame
+    /// patterns with `--orbit` (and no `--trace`, which times one frame).
+    fn of(a: &Args) -> anyhow::Result<Outputs> {
+        let named = [
+            Some(&a.output),
+            a.hits.as_ref(),
+            a.exr.as_ref(),
+            a.stats.as_ref(),
+            a.trace.as_ref(),
+        ];
+        for p in named.into_iter().flatten() {
+            check_output(p)?;
+        }
+        if a.orbit.is_some() && a.trace.is_some() {
+            anyhow::bail!(
+                "--trace records one frame's timeline; render it without --orbit (an orbit prints each frame's time, and --stats keeps them)"
+            );
+        }
+        let out = Outputs {
+            png: Output::new(&a.output, "-o", &["png"], a.orbit)?,
+            hits: a
+                .hits
+                .as_deref()
+                .map(|h| Output::new(h, "--hits", &["exr"], a.orbit))
+                .transpose()?,
+            exr: a
+                .exr
+                .as_deref()
+                .map(|e| Output::new(e, "--exr", &["exr"], a.orbit))
+                .transpose()?,
+        };
+        if let Some(n) = a.orbit {
+            // The frames' own names, as the files they will be.
+            for o in out.images() {
+                check_output(&o.name(Some(0)))?;
+            }
+            out.check_frames_apart(a, n)?;
+        }
+        Ok(out)
+    }
+
+    /// Refuses patterns that give two frames' files one name (`h%d.exr`
+    /// and `h%02d.exr` both name `h10.exr`), or a frame the name of
+    /// `--stats`, naming the options at fault.
+    fn check_frames_apart(&self, a: &Args, n: u32) -> anyhow::Result<()> {
+        let mut named: HashMap<PathBuf, String> = HashMap::new();
+        let images = [
+            ("-o", Some(&self.png)),
+            ("--hits", self.hits.as_ref()),
+            ("--exr", self.exr.as_ref()),
+        ];
+        let frames = images
+            .iter()
+            .filter_map(|(flag, o)| o.map(|o| (flag, o)))
+            .flat_map(|(flag, o)| {
+                (0..n).map(move |k| {
+                    (
+                        o.name(Some(k)),
+                        format!("{flag} {} (frame {k})", o.path.display()),
+                    )
+                })
+            });
+        let others = a
+            .stats
+            .iter()
+            .map(|p| (p.clone(), format!("--stats {}", p.display())));
+        for (name, what) in frames.chain(others) {
+            if let Some(first) = named.get(&name) {
+                anyhow::bail!(
+                    "{first} and {what} both name {}; give each output its own name",
+                    name.display()
+                );
+            }
+            named.insert(name, what);
+        }
+        Ok(())
+    }
+
+    fn images(&self) -> impl Iterator<Item = &Output> {
+        std::iter::once(&self.png)
+            .chain(self.hits.as_ref())
+            .chain(self.exr.as_ref())
+    }
+
+    /// Every file the render writes: with `--orbit`, every frame's.
+    fn all_of(&self, a: &Args) -> Vec<PathBuf> {
+        let mut all: Vec<PathBuf> = match a.orbit {
+            Some(n) => (0..n)
+                .flat_map(|k| self.images().map(move |o| o.name(Some(k))))
+                .collect(),
+            None => self.images().map(|o| o.name(None)).collect(),
+        };
+        all.extend(a.stats.iter().cloned());
+        all.extend(a.trace.iter().cloned());
+        all
+    }
+
+    /// Writes frame `k`'s images (the one frame's without `--orbit`).
+    fn write(&self, frame: &render::Frame, k: Option<u32>) -> anyhow::Result<()> {
+        frame.film.write_png(&self.png.name(k))?;
+        if let Some(h) = &self.hits {
+            frame.film.write_hits_exr(&h.name(k))?;
+        }
+        if let Some(e) = &self.exr {
+            frame.film.write_color_exr(&e.name(k))?;
+        }
+        Ok(())
+    }
+}
+
+/// A file name with one printf frame number, `%d` or `%0Nd` (as ffmpeg and
+/// Blender read image sequences): `f-%03d.png` names frame 7 `f-007.png`.
+#[derive(Debug, PartialEq)]
+struct FramePattern {
+    dir: PathBuf,
+    before: String,
+    width: usize,
+    after: String,
+}
+
+impl FramePattern {
+    fn parse(path: &Path) -> anyhow::Result<FramePattern> {
+        let name = path
+            .file_name()
+            .and_then(|n| n.to_str())
+            .context("the name needs a frame number, as in f-%03d.png")?;
+        let Some(at) = name.find('%') else {
+            anyhow::bail!(
+                "the file name needs a frame number, %d or %0Nd, as in f-%03d.png (one file per frame)"
+            );
+        };
+        let (before, rest) = (&name[..at], &name[at + 1..]);
+        let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
+        let Some(after) = rest[digits.len()..].strip_prefix('d') else {
+            anyhow::bail!("'%' must start a frame number, %d or %0Nd (as in f-%03d.png)");
+        };
+        let width = match digits.as_str() {
+            "" => 0,
+            d if d.starts_with('0') && d.len() == 2 && d != "00" => d[1..].parse()?,
+            _ => anyhow::bail!(
+                "a frame number is written %d or %0Nd with N from 1 to 9, got %{digits}d"
+            ),
+        };
+        if after.contains('%') {
+            anyhow::bail!(
+                "the file name holds one frame number, %d or %0Nd; it has more than one '%'"
+            );
+        }
+        Ok(FramePattern {
+            dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
+            before: before.to_string(),
+            width,
+            after: after.to_string(),
+        })
+    }
+
+    fn name(&self, k: u32) -> PathBuf {
+        self.dir.join(format!(
+            "{}{k:0w$}{}",
+            self.before,
+            self.after,
+            w = self.width
+        ))
+    }
 }
 
 /// Shows a bar on stderr once a render has run for a second, updated every

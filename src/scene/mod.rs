@@ -8,6 +8,7 @@
 
 pub mod backdrop;
 pub mod camera;
+pub mod orbit;
 
 use std::path::{Path, PathBuf};
 
@@ -16,6 +17,7 @@ use serde::Deserialize;
 
 pub use backdrop::{Backdrop, Pattern, Texture};
 pub use camera::{Camera, CameraError, Projection};
+pub use orbit::{Orbit, OrbitError};
 
 use crate::classify::Method;
 use crate::filter::FilterKind;
