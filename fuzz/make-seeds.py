@@ -146,6 +146,41 @@ def raw_seeds():
         write("raw", "%dx%dx%d-t%d-e%d-o%d" % (dims + (ty, endian, offset)), head + body)
 
 
+def metaimage_seeds():
+    """[len: u16 LE][header][payload]: real samples from the middle of each
+    scan behind MetaImage headers as ITK writes them, attached and detached
+    (the detached ones name in.raw, where the harness puts the payload)."""
+    types = {"uint8": "MET_UCHAR", "int8": "MET_CHAR", "uint16": "MET_USHORT",
+             "int16": "MET_SHORT", "int32": "MET_INT", "uint32": "MET_UINT",
+             "float": "MET_FLOAT", "double": "MET_DOUBLE"}
+
+    def seed(name, fields, payload):
+        hb = fields.encode()
+        write("metaimage", name, struct.pack("<H", len(hb)) + hb + payload)
+
+    for name in sorted(os.listdir(DATA)):
+        if not name.endswith(".nrrd"):
+            continue
+        stem = name[:-5]
+        header, payload = split_nrrd(os.path.join(DATA, name))
+        ty = re.search(r"type: (\w+)", header).group(1)
+        msb = "True" if "endian: big" in header else "False"
+        dims = (4, 3, 2)
+        body = middle_slab(header, payload, TYPE_SIZE[ty] * dims[0] * dims[1] * dims[2])
+        head = ("ObjectType = Image\nNDims = 3\nBinaryData = True\n"
+                "BinaryDataByteOrderMSB = %s\n%%sTransformMatrix = 1 0 0 0 1 0 0 0 1\n"
+                "Offset = 0 0 0\nAnatomicalOrientation = RAI\nElementSpacing = 1 1 1.5\n"
+                "DimSize = 4 3 2\nElementType = %s\nElementDataFile = %%s\n" % (msb, types[ty]))
+        seed(stem + "-local", head % ("", "LOCAL"), body)
+        packed = zlib.compress(body)
+        seed(stem + "-zlib", head % ("CompressedData = True\nCompressedDataSize = %d\n"
+                                     % len(packed), "LOCAL"), packed)
+        seed(stem + "-zlib-nosize", head % ("CompressedData = True\n", "LOCAL"), packed)
+        seed(stem + "-detached", head % ("HeaderSize = 3\n", "in.raw"), b"abc" + body)
+        seed(stem + "-at-end", head % ("HeaderSize = -1\n", "in.raw"), b"xyz" + body)
+        seed(stem + "-truncated", head % ("", "LOCAL"), body[:5])
+
+
 def scene_seeds():
     scenes = os.path.join(ROOT, "scenes")
     for name in sorted(os.listdir(scenes)):
@@ -160,6 +195,7 @@ if __name__ == "__main__":
     nrrd_seeds()
     nifti_seeds()
     raw_seeds()
+    metaimage_seeds()
     scene_seeds()
     for t in sorted(os.listdir(OUT)):
         files = os.listdir(os.path.join(OUT, t))

@@ -556,6 +556,32 @@ fn bad_inputs_fail_cleanly_without_output() {
     t.write("sizeof.nii", &nifti(999, 2, 8, 8));
     t.write("cplx.nii", &nifti(348, 32, 64, 64));
     t.write("x.vol", b"abc");
+    let mha = |extra: &str, ty: &str| {
+        format!(
+            "ObjectType = Image\nNDims = 3\nDimSize = 2 2 2\n{extra}ElementType = {ty}\nElementDataFile = LOCAL\n"
+        )
+    };
+    t.write("rgb.mha", mha("", "MET_RGB").as_bytes());
+    t.write(
+        "chan.mha",
+        mha("ElementNumberOfChannels = 3\n", "MET_UCHAR").as_bytes(),
+    );
+    t.write(
+        "cut.mha",
+        &[mha("", "MET_USHORT").as_bytes(), &[0u8; 5]].concat(),
+    );
+    t.write(
+        "list.mhd",
+        mha("", "MET_UCHAR").replace("LOCAL", "LIST").as_bytes(),
+    );
+    t.write(
+        "zcut.mha",
+        &[
+            mha("CompressedData = True\n", "MET_UCHAR").as_bytes(),
+            b"\x78\x9c",
+        ]
+        .concat(),
+    );
     t.write("r.raw", &[0; 10]);
     t.write("good.txt", b"1,2,3\n");
     t.write("fields.txt", b"1,2,3\n4,5\n");
@@ -656,6 +682,11 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("file", "NIfTI: shorter than its header", "info short.nii", &["short.nii", "348"]),
         bad("file", "NIfTI: wrong sizeof_hdr", "info sizeof.nii", &["sizeof.nii", "sizeof_hdr"]),
         bad("file", "NIfTI: complex datatype", "info cplx.nii", &["cplx.nii", "complex64"]),
+        bad("file", "MetaImage: an RGB element type", "info rgb.mha", &["rgb.mha", "ElementType", "MET_RGB"]),
+        bad("file", "MetaImage: three channels", "info chan.mha", &["chan.mha", "3 channels"]),
+        bad("file", "MetaImage: samples cut short", "info cut.mha", &["cut.mha", "5 bytes", "16"]),
+        bad("file", "MetaImage: one file per slice", "info list.mhd", &["list.mhd", "LIST"]),
+        bad("file", "MetaImage: zlib data cut short", "info zcut.mha", &["zcut.mha", "8"]),
         bad("file", "unknown extension", "info x.vol", &["x.vol", "unknown volume format"]),
         bad("file", "volume file missing", "info missing.nrrd", &["missing.nrrd"]),
         bad("file", "raw: file shorter than --dims", "info r.raw --dims 2,2,2 --type u16", &["r.raw"]),

@@ -4,15 +4,12 @@
 #![no_main]
 
 use libfuzzer_sys::fuzz_target;
-use snell_fuzz::{check_load, data_file_is_local, options, put};
+use snell_fuzz::{check_load, data_file_is_local, header_and_payload, options, put};
 
 fuzz_target!(|data: &[u8]| {
-    if data.len() < 2 {
+    let Some((len, header, payload)) = header_and_payload(data) else {
         return;
-    }
-    let len = u16::from_le_bytes([data[0], data[1]]) as usize;
-    let rest = &data[2..];
-    let (header, payload) = rest.split_at(len.min(rest.len()));
+    };
     if !data_file_is_local(header) {
         return;
     }

@@ -47,6 +47,15 @@ pub fn options(allow_nan: bool) -> LoadOptions {
     }
 }
 
+/// A detached-header input, `[len: u16 LE][header: len bytes][payload]`:
+/// `len`, the header and the payload (`None` under two bytes).
+pub fn header_and_payload(data: &[u8]) -> Option<(usize, &[u8], &[u8])> {
+    let (len, rest) = data.split_first_chunk::<2>()?;
+    let len = u16::from_le_bytes(*len) as usize;
+    let (header, payload) = rest.split_at(len.min(rest.len()));
+    Some((len, header, payload))
+}
+
 /// False when a NRRD header names a data file outside the scratch directory
 /// (an absolute path, a parent directory, a device): the fuzzer must only
 /// ever read the files it wrote.
@@ -59,6 +68,19 @@ pub fn data_file_is_local(header: &[u8]) -> bool {
         !(l.starts_with("data file") || l.starts_with("datafile"))
     });
     !lines.any(|l| l.contains('/') || l.contains('\\') || l.contains(".."))
+}
+
+/// False when a MetaImage header's `ElementDataFile` could name a file
+/// outside the scratch directory (a path with a folder, a parent, a
+/// device): the fuzzer must only ever read the files it wrote.
+pub fn metaimage_file_is_local(header: &[u8]) -> bool {
+    let text = String::from_utf8_lossy(header);
+    // Every line that could be the field (names are matched as written,
+    // but be generous: any line that mentions it).
+    !text
+        .lines()
+        .filter(|l| l.contains("ElementDataFile"))
+        .any(|l| l.contains('/') || l.contains('\\') || l.contains(".."))
 }
 
 /// What every load must give: a consistent volume of finite samples, or an

@@ -9,7 +9,7 @@ use super::common::VolumeArgs;
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
-    /// Volume file (.nrrd, .nhdr, .nii, .nii.gz, or raw with --dims/--type).
+    /// Volume file (.nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, or raw with --dims/--type).
     pub volume: PathBuf,
     /// Print one JSON object instead of text.
     #[arg(long)]

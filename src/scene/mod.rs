@@ -695,7 +695,7 @@ impl Scene {
                         path: self.path.clone(),
                         key: "volume.path".into(),
                         msg: format!(
-                            "{}: unknown volume format (expected .nrrd, .nhdr, .nii or .nii.gz; a headerless raw file needs a [volume.raw] table with dims = [X, Y, Z] and type = \"u16\" (u8, i8, u16, i16, u32, i32, f32, f64), optionally endian = \"big\" and offset = BYTES)",
+                            "{}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, .mha or .mhd; a headerless raw file needs a [volume.raw] table with dims = [X, Y, Z] and type = \"u16\" (u8, i8, u16, i16, u32, i32, f32, f64), optionally endian = \"big\" and offset = BYTES)",
                             file.display()
                         ),
                     },

@@ -11,6 +11,7 @@
 //! allocating, so an absurd header is an error message, not an OOM kill.
 
 pub mod limits;
+pub mod metaimage;
 pub mod nifti;
 pub mod nrrd;
 pub mod raw;
@@ -137,7 +138,7 @@ pub enum VolumeError {
         first: usize,
     },
     #[error(
-        "{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, or raw with --dims and --type)"
+        "{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, or raw with --dims and --type)"
     )]
     UnknownFormat { path: PathBuf },
     #[error("{0}")]
@@ -565,6 +566,7 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     match Format::of(path) {
         Some(Format::Nrrd) => nrrd::read(path, opts),
         Some(Format::Nifti) => nifti::read(path, opts),
+        Some(Format::MetaImage) => metaimage::read(path, opts),
         None => Err(VolumeError::UnknownFormat {
             path: path.to_path_buf(),
         }),
@@ -579,6 +581,8 @@ pub enum Format {
     Nrrd,
     /// `.nii`, `.nii.gz`
     Nifti,
+    /// `.mha`, `.mhd`
+    MetaImage,
 }
 
 impl Format {
@@ -588,6 +592,8 @@ impl Format {
             Some(Format::Nrrd)
         } else if name.ends_with(".nii") || name.ends_with(".nii.gz") {
             Some(Format::Nifti)
+        } else if name.ends_with(".mha") || name.ends_with(".mhd") {
+            Some(Format::MetaImage)
         } else {
             None
         }
@@ -598,6 +604,7 @@ impl Format {
         match self {
             Format::Nrrd => "a NRRD file",
             Format::Nifti => "a NIfTI-1 file",
+            Format::MetaImage => "a MetaImage file",
         }
     }
 }
