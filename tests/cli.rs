@@ -1202,6 +1202,70 @@ fn hits_are_bitwise_identical_across_threads_and_tiles() {
     }
 }
 
+/// A volume that is a FIFO (or names one as its data file) is refused at
+/// once instead of waiting for a writer forever, by every reader; so is a
+/// device. Each command must end within seconds.
+#[cfg(unix)]
+#[test]
+fn volumes_that_are_not_files_are_refused_without_waiting() {
+    let t = Tmp::new("fifo");
+    let fifo = |name: &str| {
+        let p = t.path(name);
+        let c = std::ffi::CString::new(p.to_str().unwrap()).unwrap();
+        // SAFETY: a valid NUL-terminated path; mkfifo only creates a node.
+        assert_eq!(
+            unsafe { libc::mkfifo(c.as_ptr(), 0o600) },
+            0,
+            "mkfifo {name}"
+        );
+        p
+    };
+    let mut cases: Vec<Vec<String>> = Vec::new();
+    for name in ["v.nrrd", "v.nii", "v.mha", "v.raw"] {
+        let p = fifo(name).to_str().unwrap().to_string();
+        let mut args = vec!["info".to_string(), p];
+        if name.ends_with(".raw") {
+            args.extend(["--dims", "2,2,2", "--type", "u8"].map(String::from));
+        }
+        cases.push(args);
+    }
+    fifo("data.raw");
+    let nhdr = t.write(
+        "d.nhdr",
+        b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: data.raw\n",
+    );
+    let mhd = t.write(
+        "d.mhd",
+        b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = data.raw\n",
+    );
+    for p in [nhdr, mhd] {
+        cases.push(vec!["info".into(), p.to_str().unwrap().into()]);
+    }
+    cases.push(
+        ["info", "/dev/zero", "--dims", "2,2,2", "--type", "u8"]
+            .map(String::from)
+            .to_vec(),
+    );
+    for args in cases {
+        let mut child = bin()
+            .args(&args)
+            .stdout(std::process::Stdio::piped())
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        let start = std::time::Instant::now();
+        while child.try_wait().unwrap().is_none() {
+            if start.elapsed() > std::time::Duration::from_secs(20) {
+                let _ = child.kill();
+                panic!("{args:?} still waiting after 20 s");
+            }
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        }
+        let o = child.wait_with_output().unwrap();
+        assert_fails(&o, &["not a regular file"]);
+    }
+}
+
 /// `render --orbit 8` writes every frame under its pattern's names and
 /// times them in `--stats`; frame 0 is the plain render bit for bit; the
 /// quarter turns see the sphere phantom exactly as frame 0 does (its grid

@@ -20,14 +20,14 @@
 //! files (`ElementDataFile = LIST` or a file-name pattern); each is refused
 //! by name. Every size is checked before it allocates, seeks or slices.
 
-use std::fs::File;
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
 use flate2::read::ZlibDecoder;
 
 use super::raw::{
-    byte_range, data_byte_len, finish_volume, map_file, max_gunzipped_len, read_full, zeroed_buffer,
+    byte_range, data_byte_len, finish_volume, map_file, max_gunzipped_len, open_file, read_full,
+    zeroed_buffer,
 };
 use super::{
     Endian, LoadOptions, SampleType, Volume, VolumeError, checked_sample_count, decode_samples,
@@ -69,7 +69,7 @@ const KNOWN_IGNORED: [&str; 23] = [
 /// Reads a `.mha` (data after the header) or `.mhd` (data file named by
 /// the header) file.
 pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
-    let file = File::open(path).map_err(|e| VolumeError::io(path, e))?;
+    let file = open_file(path).map_err(|e| VolumeError::io(path, e))?;
     let map = map_file(path, &file)?;
     let (header, header_len) = parse_header(path, &map)?;
     let layout = Layout::from_header(path, &header)?;
@@ -97,7 +97,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             samples_in(path, file, &layout, need, count, opts, &what)?
         }
         Some(data_path) => {
-            let data = File::open(data_path).map_err(|e| {
+            let data = open_file(data_path).map_err(|e| {
                 VolumeError::format(
                     path,
                     format!("ElementDataFile {}: {e}", data_path.display()),
