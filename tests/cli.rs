@@ -140,7 +140,7 @@ fn sample_prints_csv_in_input_order() {
 }
 
 #[test]
-fn phantom_writes_a_loadable_nrrd() {
+fn phantom_writes_loadable_nrrd_and_metaimage() {
     let t = Tmp::new("phantom");
     let p = t.path("ball.nrrd");
     let o = run(&[
@@ -173,6 +173,22 @@ fn phantom_writes_a_loadable_nrrd() {
         "--gzip",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
+    // The same phantom as MetaImage, compressed: the same samples.
+    let ml = |name: &str| {
+        let p = t.path(name);
+        let o = run(&[
+            "phantom",
+            "marschner-lobb",
+            "-o",
+            p.to_str().unwrap(),
+            "--gzip",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        snell::volume::load(&p, &Default::default()).unwrap()
+    };
+    let (nrrd, mha) = (ml("ml2.nrrd"), ml("ml.mha"));
+    assert_eq!(mha.dims(), nrrd.dims());
+    assert_eq!(mha.content_hash(), nrrd.content_hash());
 }
 
 /// `snell resample` upsamples a real scan: the lattice asked for, the

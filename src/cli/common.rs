@@ -247,10 +247,16 @@ pub fn check_format(path: &Path, flag: &str, formats: &[&str]) -> anyhow::Result
     if ext.as_deref().is_some_and(|e| formats.contains(&e)) {
         return Ok(());
     }
+    if let [only] = formats {
+        bail!(
+            "{flag} {}: writes {}; give the file a .{only} name",
+            path.display(),
+            only.to_ascii_uppercase(),
+        )
+    }
     bail!(
-        "{flag} {}: writes {}; give the file a .{} name",
+        "{flag} {}: the name's extension chooses the format written; give the file a .{} name",
         path.display(),
-        formats[0].to_ascii_uppercase(),
         formats.join(" or .")
     )
 }

@@ -36,9 +36,9 @@ enum Command {
     Info(info::Args),
     /// Evaluate the reconstructed field and its gradient at given points (CSV out).
     Sample(sample::Args),
-    /// Write a synthetic volume (the glass sphere with holes, Marschner-Lobb) as NRRD.
+    /// Write a synthetic volume (the glass sphere with holes, Marschner-Lobb) as NRRD or MetaImage.
     Phantom(phantom::Args),
-    /// Sample a volume's reconstruction on a new lattice over the same domain (e.g. upsample a scan to 1024³), as NRRD.
+    /// Sample a volume's reconstruction on a new lattice over the same domain (e.g. upsample a scan to 1024³), as NRRD or MetaImage.
     Resample(resample::Args),
     /// Render a scene file to PNG, with optional hit-position EXR, float EXR and stats.
     Render(render::Args),

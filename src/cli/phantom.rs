@@ -1,4 +1,4 @@
-//! `snell phantom`: synthetic volumes with known ground truth, as NRRD.
+//! `snell phantom`: synthetic volumes with known ground truth, as NRRD or MetaImage.
 
 use std::path::PathBuf;
 
@@ -8,7 +8,7 @@ use clap::{Args as ClapArgs, Subcommand};
 use snell::phantom::{
     Hole, MAX_PHANTOM_SIZE, MarschnerLobbSpec, PhantomError, PhantomFormat, SphereSpec,
 };
-use snell::volume::nrrd;
+use snell::volume;
 
 use super::common::{check_format, check_output, triple};
 
@@ -28,7 +28,7 @@ pub enum Kind {
 
 #[derive(ClapArgs, Debug)]
 pub struct Output {
-    /// Output NRRD file.
+    /// Output volume: .nrrd or .mha (the extension chooses the format).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Sample format: f32 (0..1), u8 (round 255·v) or u16 (round 65535·v).
@@ -41,7 +41,7 @@ pub struct Output {
     /// Noise seed.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Write gzip-encoded NRRD.
+    /// Compress the samples: gzip in NRRD, zlib in MetaImage.
     #[arg(long)]
     pub gzip: bool,
 }
@@ -154,7 +154,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 seed: s.out.seed,
             };
             check_output(&s.out.output)?;
-            check_format(&s.out.output, "-o", &["nrrd"])?;
+            check_format(&s.out.output, "-o", &volume::WRITTEN_FORMATS)?;
             (spec.build().map_err(option_error)?, s.out)
         }
         Kind::MarschnerLobb(m) => {
@@ -167,16 +167,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 seed: m.out.seed,
             };
             check_output(&m.out.output)?;
-            check_format(&m.out.output, "-o", &["nrrd"])?;
+            check_format(&m.out.output, "-o", &volume::WRITTEN_FORMATS)?;
             (spec.build().map_err(option_error)?, m.out)
         }
     };
-    let enc = if out.gzip {
-        nrrd::Encoding::Gzip
-    } else {
-        nrrd::Encoding::Raw
-    };
-    nrrd::write(&out.output, &vol, enc)?;
+    volume::write(&out.output, &vol, out.gzip)?;
     let d = vol.dims();
     eprintln!(
         "wrote {} ({}x{}x{} {})",

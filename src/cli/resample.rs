@@ -1,5 +1,5 @@
 //! `snell resample`: a volume reconstructed by a filter and sampled on a new
-//! lattice over the same domain, as NRRD (e.g. a scan upsampled to 1024³).
+//! lattice over the same domain, as NRRD or MetaImage (e.g. a scan upsampled to 1024³).
 
 use std::path::PathBuf;
 use std::time::Instant;
@@ -8,7 +8,7 @@ use anyhow::Context;
 use clap::Args as ClapArgs;
 
 use snell::filter::resample::resample;
-use snell::volume::{SampleType, nrrd};
+use snell::volume::{self, SampleType};
 
 use super::common::{VolumeArgs, check_distinct, check_format, check_output, human_mib, triple};
 
@@ -16,7 +16,7 @@ use super::common::{VolumeArgs, check_distinct, check_format, check_output, huma
 pub struct Args {
     /// Volume file.
     pub volume: PathBuf,
-    /// Output NRRD file.
+    /// Output volume: .nrrd or .mha (the extension chooses the format).
     #[arg(short, long)]
     pub output: PathBuf,
     /// Samples per axis of the new lattice: X,Y,Z (the first and last stay on the domain's faces).
@@ -31,7 +31,7 @@ pub struct Args {
     /// Sample type written: u8, i8, u16, i16, u32, i32, f32 (integers rounded and clamped; default: the input's, f64 as f32).
     #[arg(long)]
     pub format: Option<String>,
-    /// Write gzip-encoded NRRD.
+    /// Compress the samples: gzip in NRRD, zlib in MetaImage.
     #[arg(long)]
     pub gzip: bool,
     #[command(flatten)]
@@ -52,7 +52,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         ),
     };
     check_output(&a.output)?;
-    check_format(&a.output, "-o", &["nrrd"])?;
+    check_format(&a.output, "-o", &volume::WRITTEN_FORMATS)?;
     check_distinct(&[&a.output], &[&a.volume])?;
     let opts = a.vol.load_options(&a.volume)?;
     let vol = a.vol.load_with(&a.volume, &opts)?;
@@ -65,12 +65,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .with_context(|| a.volume.display().to_string())?;
     let took = start.elapsed().as_secs_f64();
     drop(vol);
-    let enc = if a.gzip {
-        nrrd::Encoding::Gzip
-    } else {
-        nrrd::Encoding::Raw
-    };
-    nrrd::write(&a.output, &out, enc)?;
+    volume::write(&a.output, &out, a.gzip)?;
     let d = out.dims();
     let s = out.spacing();
     let peak = snell::bench::machine::peak_rss_mib()

@@ -9,7 +9,8 @@
 //! `ElementSpacing` is absent. Only what a scalar grid needs is
 //! interpreted; the orientation and origin fields (`TransformMatrix`,
 //! `Offset`, ...) are read past, as the renderer works in grid coordinates
-//! × spacing (SPEC.md). A field MetaIO does not know is passed over with a
+//! × spacing (SPEC.md). Other fields are metadata, passed over as MetaIO
+//! keeps them, but one a letter or two from an interpreted name gets a
 //! warning, since a misspelt `ElementSpacing` would otherwise leave the
 //! volume with the wrong geometry, unsaid; the intensity function
 //! (`ElementToIntensityFunctionSlope`/`Offset`), which ITK does not apply
@@ -20,14 +21,16 @@
 //! files (`ElementDataFile = LIST` or a file-name pattern); each is refused
 //! by name. Every size is checked before it allocates, seeks or slices.
 
-use std::io::Read;
+use std::io::{Read, Seek, SeekFrom, Write};
 use std::path::{Path, PathBuf};
 
+use flate2::Compression;
 use flate2::read::ZlibDecoder;
+use flate2::write::ZlibEncoder;
 
 use super::raw::{
     byte_range, data_byte_len, finish_volume, map_file, max_gunzipped_len, open_file, read_full,
-    zeroed_buffer,
+    write_samples, zeroed_buffer,
 };
 use super::{
     Endian, LoadOptions, SampleType, Volume, VolumeError, checked_sample_count, decode_samples,
@@ -127,6 +130,76 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     Ok(vol)
 }
 
+/// Writes `vol` as an attached MetaImage (`.mha`): the header ITK writes
+/// for a volume at the origin with identity orientation, then the samples
+/// in their native type, little endian, zlib-compressed when `compressed`.
+/// ITK cannot read compressed data without its `CompressedDataSize`
+/// (checked with SimpleITK 2.5: "Uncompress failed"), so the field is
+/// written as 20 zeros, the samples compressed as they stream out, and the
+/// size written over the zeros (zero-padded, which MetaIO and ITK read as
+/// the number). Written atomically.
+pub fn write(path: &Path, vol: &Volume, compressed: bool) -> Result<(), VolumeError> {
+    crate::atomic::write_atomic(path, |out| {
+        let (before, after) = header_text(vol, compressed);
+        out.write_all(before.as_bytes())?;
+        if !compressed {
+            out.write_all(after.as_bytes())?;
+            return write_samples(out, vol);
+        }
+        let slot = out.stream_position()?;
+        out.write_all(&[b'0'; SIZE_DIGITS])?;
+        out.write_all(after.as_bytes())?;
+        let start = out.stream_position()?;
+        let mut z = ZlibEncoder::new(&mut *out, Compression::default());
+        write_samples(&mut z, vol)?;
+        z.finish()?;
+        let end = out.stream_position()?;
+        out.seek(SeekFrom::Start(slot))?;
+        write!(out, "{:0w$}", end - start, w = SIZE_DIGITS)?;
+        out.seek(SeekFrom::Start(end))?;
+        Ok(())
+    })
+    .map_err(|e| VolumeError::io(path, e))
+}
+
+/// Digits of the `CompressedDataSize` slot: any `u64`.
+const SIZE_DIGITS: usize = 20;
+
+/// The header [`write`] writes, split where the compressed size goes (the
+/// second part empty of it when not compressed).
+fn header_text(vol: &Volume, compressed: bool) -> (String, String) {
+    let [nx, ny, nz] = vol.dims();
+    // Debug formatting of f64 is the shortest text that parses back to the
+    // same bits.
+    let [sx, sy, sz] = vol.spacing().map(|s| format!("{s:?}"));
+    let ty = match vol.native_type() {
+        SampleType::I8 => "MET_CHAR",
+        SampleType::U8 => "MET_UCHAR",
+        SampleType::I16 => "MET_SHORT",
+        SampleType::U16 => "MET_USHORT",
+        SampleType::I32 => "MET_INT",
+        SampleType::U32 => "MET_UINT",
+        SampleType::F32 => "MET_FLOAT",
+        SampleType::F64 => "MET_DOUBLE",
+    };
+    let start =
+        "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n";
+    let rest = format!(
+        "TransformMatrix = 1 0 0 0 1 0 0 0 1\nOffset = 0 0 0\nCenterOfRotation = 0 0 0\nElementSpacing = {sx} {sy} {sz}\nDimSize = {nx} {ny} {nz}\nElementType = {ty}\nElementDataFile = LOCAL\n"
+    );
+    if compressed {
+        (
+            format!("{start}CompressedData = True\nCompressedDataSize = "),
+            format!("\n{rest}"),
+        )
+    } else {
+        (
+            format!("{start}CompressedData = False\n{rest}"),
+            String::new(),
+        )
+    }
+}
+
 /// The header's fields in order, and what is worth a warning.
 struct Header {
     fields: Vec<(String, String)>,
@@ -206,9 +279,12 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(Header, u64), VolumeError>
         if header.get(name).is_some() {
             return Err(bad(format!("{name} given twice")));
         }
-        if !INTERPRETED.contains(&name) && !KNOWN_IGNORED.contains(&name) {
+        if !INTERPRETED.contains(&name)
+            && !KNOWN_IGNORED.contains(&name)
+            && let Some(meant) = near_miss(name)
+        {
             header.warnings.push(format!(
-                "{}: header line {line_no}: unknown field '{name}' ignored (MetaIO names are case-sensitive, e.g. ElementSpacing)",
+                "{}: header line {line_no}: unknown field '{name}' ignored; did you mean '{meant}'? (MetaIO reads names as written)",
                 path.display()
             ));
         }
@@ -256,6 +332,32 @@ fn intensity_warning(path: &Path, h: &Header) -> Option<String> {
             offset.unwrap_or("0")
         )
     })
+}
+
+/// The interpreted field an unknown name was likely meant to be: the same
+/// in another case, or at most two letters apart. Other unknown names are
+/// metadata (ITK writes `ITK_InputFilterName`, say), passed over quietly as
+/// MetaIO keeps them.
+fn near_miss(name: &str) -> Option<&'static str> {
+    INTERPRETED
+        .into_iter()
+        .find(|f| f.eq_ignore_ascii_case(name) || edit_distance(f, name) <= 2)
+}
+
+/// Levenshtein distance between two short names (bytes).
+fn edit_distance(a: &str, b: &str) -> usize {
+    let (a, b) = (a.as_bytes(), b.as_bytes());
+    let mut row: Vec<usize> = (0..=b.len()).collect();
+    for (i, &ca) in a.iter().enumerate() {
+        let mut diag = row[0];
+        row[0] = i + 1;
+        for (j, &cb) in b.iter().enumerate() {
+            let up = row[j + 1];
+            row[j + 1] = (up + 1).min(row[j] + 1).min(diag + usize::from(ca != cb));
+            diag = up;
+        }
+    }
+    row[b.len()]
 }
 
 /// A line as a message quotes it: printable, at most 60 characters.
@@ -853,11 +955,44 @@ mod tests {
         }
     }
 
+    /// What [`write`] writes reads back bit for bit, every sample type,
+    /// raw and compressed, with the spacing's exact bits.
+    #[test]
+    fn writes_what_it_reads() {
+        let d = Dir::new("writes");
+        let types = [
+            SampleType::I8,
+            SampleType::U8,
+            SampleType::I16,
+            SampleType::U16,
+            SampleType::I32,
+            SampleType::U32,
+            SampleType::F32,
+            SampleType::F64,
+        ];
+        for ty in types {
+            let samples: Vec<f32> = (0..60).map(|i| (i * 2 + 1) as f32).collect();
+            let vol = Volume::new([5, 4, 3], [0.1, 1.0 / 3.0, 2.5], ty, samples).unwrap();
+            for compressed in [false, true] {
+                let p = d.path(&format!("{ty}-{compressed}.mha"));
+                write(&p, &vol, compressed).unwrap();
+                let back = read(&p, &LoadOptions::default()).unwrap();
+                assert_eq!(back.native_type(), ty);
+                assert_eq!(back.samples(), vol.samples(), "{ty} {compressed}");
+                assert_eq!(
+                    back.spacing().map(f64::to_bits),
+                    vol.spacing().map(f64::to_bits)
+                );
+                assert!(back.warnings.is_empty(), "{:?}", back.warnings);
+            }
+        }
+    }
+
     #[test]
     fn unknown_fields_and_intensity_functions_are_warned_of() {
         let d = Dir::new("unknown");
         let mut f = header(
-            "ElementSpacng = 2 2 2\nAnatomicalOrientation = RAI\n",
+            "ElementSpacng = 2 2 2\nAnatomicalOrientation = RAI\nITK_InputFilterName = NrrdImageIO\nITK_original_spacing = 1 1 1\n",
             "LOCAL",
         )
         .into_bytes();
@@ -866,17 +1001,12 @@ mod tests {
         assert_eq!(v.spacing(), [1.0; 3]);
         assert_eq!(v.warnings.len(), 1, "{:?}", v.warnings);
         assert!(
-            v.warnings[0].contains("'ElementSpacng'"),
+            v.warnings[0].contains("'ElementSpacng'") && v.warnings[0].contains("'ElementSpacing'"),
             "{:?}",
             v.warnings
         );
 
-        let mut f = header(
-            "ElementToIntensityFunctionSlope = 2
-",
-            "LOCAL",
-        )
-        .into_bytes();
+        let mut f = header("ElementToIntensityFunctionSlope = 2\n", "LOCAL").into_bytes();
         f.extend(samples(Endian::Little));
         let v = d.read("i.mha", &f).unwrap();
         expect_samples(&v);

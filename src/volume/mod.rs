@@ -573,6 +573,31 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     }
 }
 
+/// Writes `vol` in the format its name chooses: NRRD (`.nrrd`, gzip when
+/// `compressed`) or MetaImage (`.mha`, zlib when `compressed`). The
+/// detached forms (`.nhdr`, `.mhd`) and NIfTI are read, not written.
+pub fn write(path: &Path, vol: &Volume, compressed: bool) -> Result<(), VolumeError> {
+    let name = path.to_string_lossy().to_ascii_lowercase();
+    if name.ends_with(".nrrd") {
+        let encoding = if compressed {
+            nrrd::Encoding::Gzip
+        } else {
+            nrrd::Encoding::Raw
+        };
+        nrrd::write(path, vol, encoding)
+    } else if name.ends_with(".mha") {
+        metaimage::write(path, vol, compressed)
+    } else {
+        Err(VolumeError::unsupported(
+            path,
+            "volumes are written as .nrrd or .mha",
+        ))
+    }
+}
+
+/// The formats [`write`] writes, by extension.
+pub const WRITTEN_FORMATS: [&str; 2] = ["nrrd", "mha"];
+
 /// The volume formats [`load`] knows by their file names (anything else
 /// needs a raw layout).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]

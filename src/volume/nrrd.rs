@@ -28,7 +28,7 @@ use flate2::write::GzEncoder;
 
 use super::raw::{
     byte_range, data_byte_len, finish_volume, gzip_error, map_file, max_gunzipped_len, open_file,
-    read_full, skip_bytes, zeroed_buffer,
+    read_full, skip_bytes, write_samples, zeroed_buffer,
 };
 use super::{
     Endian, LoadOptions, SampleType, Volume, VolumeError, checked_sample_count, decode_samples,
@@ -1574,21 +1574,6 @@ fn nrrd_type_name(ty: SampleType) -> &'static str {
     }
 }
 
-/// Streams the samples in the native type, little endian, in chunks so no
-/// second copy of the volume is built.
-fn write_samples<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
-    let ty = vol.native_type();
-    let mut buf: Vec<u8> = Vec::with_capacity(64 * 1024);
-    for chunk in vol.samples().chunks(8192) {
-        buf.clear();
-        for &v in chunk {
-            encode_sample(ty, v, &mut buf);
-        }
-        out.write_all(&buf)?;
-    }
-    Ok(())
-}
-
 /// The samples as decimal text in the native type, one row along x per
 /// line; floats in their shortest form that reads back to the same bits.
 fn write_text<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
@@ -1617,22 +1602,6 @@ fn write_text<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
         out.write_all(line.as_bytes())?;
     }
     Ok(())
-}
-
-/// One sample in the native type. Integer volumes hold integral values, so the
-/// rounding only guards against samples edited after loading; `as` saturates
-/// out-of-range values (and maps NaN to 0), which is the clamp we want.
-fn encode_sample(ty: SampleType, v: f32, out: &mut Vec<u8>) {
-    match ty {
-        SampleType::I8 => out.extend_from_slice(&(v.round() as i8).to_le_bytes()),
-        SampleType::U8 => out.extend_from_slice(&(v.round() as u8).to_le_bytes()),
-        SampleType::I16 => out.extend_from_slice(&(v.round() as i16).to_le_bytes()),
-        SampleType::U16 => out.extend_from_slice(&(v.round() as u16).to_le_bytes()),
-        SampleType::I32 => out.extend_from_slice(&(v.round() as i32).to_le_bytes()),
-        SampleType::U32 => out.extend_from_slice(&(v.round() as u32).to_le_bytes()),
-        SampleType::F32 => out.extend_from_slice(&v.to_le_bytes()),
-        SampleType::F64 => out.extend_from_slice(&f64::from(v).to_le_bytes()),
-    }
 }
 
 #[cfg(test)]
@@ -1995,15 +1964,5 @@ mod tests {
         assert_eq!(skip_lines_from(&mut c, 2).unwrap(), Some(5));
         let mut c = Cursor::new(b"a".to_vec());
         assert_eq!(skip_lines_from(&mut c, 1).unwrap(), None);
-    }
-
-    #[test]
-    fn encode_clamps_and_rounds() {
-        let mut out = Vec::new();
-        encode_sample(SampleType::U8, 300.0, &mut out);
-        encode_sample(SampleType::U8, -3.0, &mut out);
-        encode_sample(SampleType::I8, 2.6, &mut out);
-        encode_sample(SampleType::U16, f32::NAN, &mut out);
-        assert_eq!(out, vec![255, 0, 3, 0, 0]);
     }
 }

@@ -12,7 +12,7 @@
 //! bytes in front of [`decode_samples`].
 
 use std::fs::File;
-use std::io::{self, Read};
+use std::io::{self, Read, Write};
 use std::ops::Deref;
 use std::path::Path;
 
@@ -317,9 +317,50 @@ pub(super) fn zeroed_buffer(path: &Path, len: usize) -> Result<Vec<u8>, VolumeEr
     Ok(buf)
 }
 
+/// Streams the samples in the native type, little endian, in chunks so no
+/// second copy of the volume is built.
+pub(super) fn write_samples<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
+    let ty = vol.native_type();
+    let mut buf: Vec<u8> = Vec::with_capacity(64 * 1024);
+    for chunk in vol.samples().chunks(8192) {
+        buf.clear();
+        for &v in chunk {
+            encode_sample(ty, v, &mut buf);
+        }
+        out.write_all(&buf)?;
+    }
+    Ok(())
+}
+
+/// One sample in the native type. Integer volumes hold integral values, so the
+/// rounding only guards against samples edited after loading; `as` saturates
+/// out-of-range values (and maps NaN to 0), which is the clamp we want.
+pub(super) fn encode_sample(ty: SampleType, v: f32, out: &mut Vec<u8>) {
+    match ty {
+        SampleType::I8 => out.extend_from_slice(&(v.round() as i8).to_le_bytes()),
+        SampleType::U8 => out.extend_from_slice(&(v.round() as u8).to_le_bytes()),
+        SampleType::I16 => out.extend_from_slice(&(v.round() as i16).to_le_bytes()),
+        SampleType::U16 => out.extend_from_slice(&(v.round() as u16).to_le_bytes()),
+        SampleType::I32 => out.extend_from_slice(&(v.round() as i32).to_le_bytes()),
+        SampleType::U32 => out.extend_from_slice(&(v.round() as u32).to_le_bytes()),
+        SampleType::F32 => out.extend_from_slice(&v.to_le_bytes()),
+        SampleType::F64 => out.extend_from_slice(&f64::from(v).to_le_bytes()),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn encode_clamps_and_rounds() {
+        let mut out = Vec::new();
+        encode_sample(SampleType::U8, 300.0, &mut out);
+        encode_sample(SampleType::U8, -3.0, &mut out);
+        encode_sample(SampleType::I8, 2.6, &mut out);
+        encode_sample(SampleType::U16, f32::NAN, &mut out);
+        assert_eq!(out, vec![255, 0, 3, 0, 0]);
+    }
     use crate::volume::Endian;
 
     #[test]
