@@ -172,16 +172,10 @@ fn header_text(vol: &Volume, compressed: bool) -> (String, String) {
     // Debug formatting of f64 is the shortest text that parses back to the
     // same bits.
     let [sx, sy, sz] = vol.spacing().map(|s| format!("{s:?}"));
-    let ty = match vol.native_type() {
-        SampleType::I8 => "MET_CHAR",
-        SampleType::U8 => "MET_UCHAR",
-        SampleType::I16 => "MET_SHORT",
-        SampleType::U16 => "MET_USHORT",
-        SampleType::I32 => "MET_INT",
-        SampleType::U32 => "MET_UINT",
-        SampleType::F32 => "MET_FLOAT",
-        SampleType::F64 => "MET_DOUBLE",
-    };
+    let ty = TYPE_NAMES
+        .iter()
+        .find(|(t, _)| *t == vol.native_type())
+        .map_or("MET_DOUBLE", |(_, n)| *n);
     let start =
         "ObjectType = Image\nNDims = 3\nBinaryData = True\nBinaryDataByteOrderMSB = False\n";
     let rest = format!(
@@ -276,7 +270,9 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<(Header, u64), VolumeError>
             .ok_or_else(|| bad(format!("'{}' is not a field name", excerpt(&line[..eq]))))?;
         // Values are text; a Latin-1 comment is read past as such.
         let value = String::from_utf8_lossy(&line[eq + 1..]).trim().to_string();
-        if header.get(name).is_some() {
+        // Two values for what is interpreted leave the volume ambiguous;
+        // repeated metadata (two comments) is harmless.
+        if INTERPRETED.contains(&name) && header.get(name).is_some() {
             return Err(bad(format!("{name} given twice")));
         }
         if !INTERPRETED.contains(&name)
@@ -569,29 +565,35 @@ impl Layout {
     }
 }
 
-/// `ElementType`'s sample type; MetaIO's sizes (`MET_LONG` is 4 bytes in
-/// its table).
+/// MetaIO's names of the sample types, as [`write`] writes them.
+const TYPE_NAMES: [(SampleType, &str); 8] = [
+    (SampleType::I8, "MET_CHAR"),
+    (SampleType::U8, "MET_UCHAR"),
+    (SampleType::I16, "MET_SHORT"),
+    (SampleType::U16, "MET_USHORT"),
+    (SampleType::I32, "MET_INT"),
+    (SampleType::U32, "MET_UINT"),
+    (SampleType::F32, "MET_FLOAT"),
+    (SampleType::F64, "MET_DOUBLE"),
+];
+
+/// `ElementType`'s sample type: [`TYPE_NAMES`], and `MET_LONG` and
+/// `MET_ULONG`, 4 bytes in MetaIO's table of sizes.
 fn element_type(name: &str) -> Result<SampleType, String> {
-    Ok(match name {
-        "MET_CHAR" => SampleType::I8,
-        "MET_UCHAR" => SampleType::U8,
-        "MET_SHORT" => SampleType::I16,
-        "MET_USHORT" => SampleType::U16,
-        "MET_INT" | "MET_LONG" => SampleType::I32,
-        "MET_UINT" | "MET_ULONG" => SampleType::U32,
-        "MET_FLOAT" => SampleType::F32,
-        "MET_DOUBLE" => SampleType::F64,
-        "MET_LONG_LONG" | "MET_ULONG_LONG" => {
-            return Err(format!(
-                "{name} (64-bit integers) is not read; convert to MET_INT, MET_FLOAT or MET_DOUBLE"
-            ));
-        }
-        other => {
-            return Err(format!(
-                "'{other}' is not a scalar type snell reads (MET_CHAR, MET_UCHAR, MET_SHORT, MET_USHORT, MET_INT, MET_UINT, MET_LONG, MET_ULONG, MET_FLOAT, MET_DOUBLE)"
-            ));
-        }
-    })
+    if let Some(&(ty, _)) = TYPE_NAMES.iter().find(|(_, n)| *n == name) {
+        return Ok(ty);
+    }
+    match name {
+        "MET_LONG" => Ok(SampleType::I32),
+        "MET_ULONG" => Ok(SampleType::U32),
+        "MET_LONG_LONG" | "MET_ULONG_LONG" => Err(format!(
+            "{name} (64-bit integers) is not read; convert to MET_INT, MET_FLOAT or MET_DOUBLE"
+        )),
+        other => Err(format!(
+            "'{other}' is not a scalar type snell reads ({}, MET_LONG, MET_ULONG)",
+            TYPE_NAMES.map(|(_, n)| n).join(", ")
+        )),
+    }
 }
 
 /// MetaIO's booleans: `True`/`False` in any case, or `1`/`0`.
