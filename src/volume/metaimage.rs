@@ -1,9 +1,9 @@
-//! MetaImage volumes (ITK's MetaIO, as 3D Slicer, ITK-SNAP and elastix
-//! write them): `.mha` with the samples after the header, `.mhd` naming a
-//! data file beside it, raw or zlib-compressed.
+//! MetaImage volumes (ITK's MetaIO format): `.mha` with the samples after
+//! the header, `.mhd` naming a data file beside it, raw or zlib-compressed.
 //!
 //! The header is read as MetaIO reads it: `Name = Value` lines, names as
-//! written (MetaIO compares them case-sensitively), `ElementDataFile` the
+//! written (ITK 5.4 left a volume with `elementspacing = 2 2 2` at spacing
+//! 1, checked with SimpleITK 2.5.7), `ElementDataFile` the
 //! last field, `HeaderSize` an absolute offset in the data file (`-1`: the
 //! samples end the file), and `ElementSize` the spacing where
 //! `ElementSpacing` is absent. Only what a scalar grid needs is
@@ -14,7 +14,8 @@
 //! warning, since a misspelt `ElementSpacing` would otherwise leave the
 //! volume with the wrong geometry, unsaid; the intensity function
 //! (`ElementToIntensityFunctionSlope`/`Offset`), which ITK does not apply
-//! either, gets a warning when it is not the identity.
+//! either (SimpleITK read a slope of 2 and offset of 10 as the stored
+//! values), gets a warning when it is not the identity.
 //!
 //! Not read: several channels per element, ASCII element data
 //! (`BinaryData = False`), 64-bit integers, and slices spread over several
@@ -378,9 +379,7 @@ struct Layout {
     compressed: bool,
     /// Bytes of zlib data (`CompressedDataSize`), when given.
     compressed_size: Option<u64>,
-    /// Where the samples start in the data file; `None`: they end it
-    /// (`HeaderSize = -1`), or, without a `HeaderSize`, they follow an
-    /// attached header (or start a data file).
+    /// Where the samples start in the data file.
     header_size: HeaderSize,
     /// The data file; `None` for `LOCAL` (after the header).
     data_file: Option<PathBuf>,
