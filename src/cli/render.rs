@@ -81,9 +81,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let scene = load_scene(&a.scene, &a.set)?;
     let outputs = Outputs::of(&a)?;
-    let files = outputs.all_of(&a);
     check_distinct(
-        &files.iter().map(PathBuf::as_path).collect::<Vec<_>>(),
+        &outputs
+            .files
+            .iter()
+            .map(PathBuf::as_path)
+            .collect::<Vec<_>>(),
         &scene.input_files(),
     )?;
     let window = a
@@ -307,16 +310,26 @@ struct Outputs {
     png: Output,
     hits: Option<Output>,
     exr: Option<Output>,
+    /// Every file the render writes (with `--orbit`, every frame's), for
+    /// the check against the inputs and each other.
+    files: Vec<PathBuf>,
 }
 
 /// One image output's file, or its frames' pattern.
 struct Output {
+    /// The option that names it.
+    flag: &'static str,
     path: PathBuf,
     pattern: Option<FramePattern>,
 }
 
 impl Output {
-    fn new(path: &Path, flag: &str, formats: &[&str], orbit: Option<u32>) -> anyhow::Result<Self> {
+    fn new(
+        path: &Path,
+        flag: &'static str,
+        formats: &[&str],
+        orbit: Option<u32>,
+    ) -> anyhow::Result<Self> {
         check_format(path, flag, formats)?;
         let pattern = match orbit {
             Some(_) => Some(
@@ -326,6 +339,7 @@ impl Output {
             None => None,
         };
         Ok(Output {
+            flag,
             path: path.to_path_buf(),
             pattern,
         })
@@ -359,7 +373,7 @@ impl Outputs {
                 "--trace records one frame's timeline; render it without --orbit (an orbit prints each frame's time, and --stats keeps them)"
             );
         }
-        let out = Outputs {
+        let mut out = Outputs {
             png: Output::new(&a.output, "-o", &["png"], a.orbit)?,
             hits: a
                 .hits
@@ -371,71 +385,46 @@ impl Outputs {
                 .as_deref()
                 .map(|e| Output::new(e, "--exr", &["exr"], a.orbit))
                 .transpose()?,
+            files: Vec::new(),
         };
-        if let Some(n) = a.orbit {
+        let files = out.named_files(a);
+        if a.orbit.is_some() {
             // The frames' own names, as the files they will be.
             for o in out.images() {
                 check_output(&o.name(Some(0)))?;
             }
-            out.check_frames_apart(a, n)?;
+            frames_apart(&files)?;
         }
+        out.files = files.into_iter().map(|(p, _)| p).collect();
         Ok(out)
     }
 
-    /// Refuses patterns that give two frames' files one name (`h%d.exr`
-    /// and `h%02d.exr` both name `h10.exr`), or a frame the name of
-    /// `--stats`, naming the options at fault.
-    fn check_frames_apart(&self, a: &Args, n: u32) -> anyhow::Result<()> {
-        let mut named: HashMap<PathBuf, String> = HashMap::new();
-        let images = [
-            ("-o", Some(&self.png)),
-            ("--hits", self.hits.as_ref()),
-            ("--exr", self.exr.as_ref()),
-        ];
-        let frames = images
-            .iter()
-            .filter_map(|(flag, o)| o.map(|o| (flag, o)))
-            .flat_map(|(flag, o)| {
-                (0..n).map(move |k| {
-                    (
-                        o.name(Some(k)),
-                        format!("{flag} {} (frame {k})", o.path.display()),
-                    )
-                })
+    /// Every file the render writes (with `--orbit`, every frame's), each
+    /// with the option that names it: `--hits h%d.exr (frame 10)`.
+    fn named_files(&self, a: &Args) -> Vec<(PathBuf, String)> {
+        let frames: Vec<Option<u32>> = match a.orbit {
+            Some(n) => (0..n).map(Some).collect(),
+            None => vec![None],
+        };
+        let images = self.images().flat_map(|o| {
+            frames.iter().map(move |&k| {
+                let frame = k.map_or(String::new(), |k| format!(" (frame {k})"));
+                (o.name(k), format!("{} {}{frame}", o.flag, o.path.display()))
+            })
+        });
+        let others = [("--stats", &a.stats), ("--trace", &a.trace)]
+            .into_iter()
+            .filter_map(|(flag, p)| {
+                p.as_ref()
+                    .map(|p| (p.clone(), format!("{flag} {}", p.display())))
             });
-        let others = a
-            .stats
-            .iter()
-            .map(|p| (p.clone(), format!("--stats {}", p.display())));
-        for (name, what) in frames.chain(others) {
-            if let Some(first) = named.get(&name) {
-                anyhow::bail!(
-                    "{first} and {what} both name {}; give each output its own name",
-                    name.display()
-                );
-            }
-            named.insert(name, what);
-        }
-        Ok(())
+        images.chain(others).collect()
     }
 
     fn images(&self) -> impl Iterator<Item = &Output> {
         std::iter::once(&self.png)
             .chain(self.hits.as_ref())
             .chain(self.exr.as_ref())
-    }
-
-    /// Every file the render writes: with `--orbit`, every frame's.
-    fn all_of(&self, a: &Args) -> Vec<PathBuf> {
-        let mut all: Vec<PathBuf> = match a.orbit {
-            Some(n) => (0..n)
-                .flat_map(|k| self.images().map(move |o| o.name(Some(k))))
-                .collect(),
-            None => self.images().map(|o| o.name(None)).collect(),
-        };
-        all.extend(a.stats.iter().cloned());
-        all.extend(a.trace.iter().cloned());
-        all
     }
 
     /// Writes frame `k`'s images (the one frame's without `--orbit`).
@@ -449,6 +438,22 @@ impl Outputs {
         }
         Ok(())
     }
+}
+
+/// Refuses outputs that give two files one name (`h%d.exr` and
+/// `h%02d.exr` both name `h10.exr`), or a frame the name of `--stats`,
+/// naming the options at fault.
+fn frames_apart(files: &[(PathBuf, String)]) -> anyhow::Result<()> {
+    let mut named: HashMap<&Path, &str> = HashMap::new();
+    for (name, what) in files {
+        if let Some(first) = named.insert(name, what) {
+            anyhow::bail!(
+                "{first} and {what} both name {}; give each output its own name",
+                name.display()
+            );
+        }
+    }
+    Ok(())
 }
 
 /// A file name with one printf frame number, `%d` or `%0Nd` (as ffmpeg and
