@@ -49,17 +49,24 @@ def middle_slab(header, payload, nbytes):
     return payload[mid:mid + nbytes]
 
 
-def nrrd_seeds():
+SEED_DIMS = (4, 3, 2)
+
+
+def scans():
+    """Each real NRRD scan: its stem, header, payload, type and SEED_DIMS'
+    worth of its samples from the middle of the volume."""
     for name in sorted(os.listdir(DATA)):
         if not name.endswith(".nrrd"):
             continue
-        stem = name[:-5]
         header, payload = split_nrrd(os.path.join(DATA, name))
         ty = re.search(r"type: (\w+)", header).group(1)
-        size = TYPE_SIZE[ty]
-        dims = (4, 3, 2)
-        n = dims[0] * dims[1] * dims[2]
-        samples = middle_slab(header, payload, n * size)
+        n = SEED_DIMS[0] * SEED_DIMS[1] * SEED_DIMS[2]
+        yield name[:-5], header, payload, ty, middle_slab(header, payload, n * TYPE_SIZE[ty])
+
+
+def nrrd_seeds():
+    for stem, header, payload, ty, samples in scans():
+        dims = SEED_DIMS
         small = re.sub(r"sizes: .*", "sizes: %d %d %d" % dims, header)
         # Attached: gzip as in the real file, and raw.
         write("nrrd", stem + "-gzip.nrrd", (small + "\n\n").encode() + gzip.compress(samples, mtime=0))
@@ -158,15 +165,8 @@ def metaimage_seeds():
         hb = fields.encode()
         write("metaimage", name, struct.pack("<H", len(hb)) + hb + payload)
 
-    for name in sorted(os.listdir(DATA)):
-        if not name.endswith(".nrrd"):
-            continue
-        stem = name[:-5]
-        header, payload = split_nrrd(os.path.join(DATA, name))
-        ty = re.search(r"type: (\w+)", header).group(1)
+    for stem, header, _, ty, body in scans():
         msb = "True" if "endian: big" in header else "False"
-        dims = (4, 3, 2)
-        body = middle_slab(header, payload, TYPE_SIZE[ty] * dims[0] * dims[1] * dims[2])
         head = ("ObjectType = Image\nNDims = 3\nBinaryData = True\n"
                 "BinaryDataByteOrderMSB = %s\n%%sTransformMatrix = 1 0 0 0 1 0 0 0 1\n"
                 "Offset = 0 0 0\nAnatomicalOrientation = RAI\nElementSpacing = 1 1 1.5\n"
