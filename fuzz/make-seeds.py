@@ -3,7 +3,10 @@
 in ../shared/data and scenes/*.toml. Every seed is small: real headers with
 their sizes cut down to a few voxels and a payload of real samples (a slab
 from the middle of the volume), plus a few type/endian/encoding variants and
-the untouched header with a tiny payload (the truncation path).
+the untouched header with a tiny payload (the truncation path). The image
+targets get hand-written EXRs and PNGs, scenes/photo.jpg whole and cut short,
+and snell's own 8x8 renders (PNG, colour and hit EXRs, whole and as a
+region) when target/release/snell is built.
 
 Run from the repository root: python3 fuzz/make-seeds.py
 """
@@ -191,12 +194,128 @@ def scene_seeds():
             write("scene", name + "-set", text + b"\0surface.filter=linear\nrender.traversal=step\n")
 
 
+def exr(channels, width, height, origin=(0, 0), full=None):
+    """An uncompressed scanline OpenEXR: channels as (name, pixel type (0
+    uint, 1 half, 2 float), values row by row), in a display window of
+    `full` with the data window at `origin`."""
+    full = full or (width, height)
+    channels = sorted(channels)
+
+    def attr(name, kind, value):
+        return name.encode() + b"\0" + kind.encode() + b"\0" + struct.pack("<i", len(value)) + value
+
+    chlist = b"".join(n.encode() + b"\0" + struct.pack("<iB3xii", t, 0, 1, 1)
+                      for n, t, _ in channels) + b"\0"
+    x0, y0 = origin
+    header = (b"\x76\x2f\x31\x01" + struct.pack("<i", 2)
+              + attr("channels", "chlist", chlist)
+              + attr("compression", "compression", b"\0")
+              + attr("dataWindow", "box2i", struct.pack("<4i", x0, y0, x0 + width - 1, y0 + height - 1))
+              + attr("displayWindow", "box2i", struct.pack("<4i", 0, 0, full[0] - 1, full[1] - 1))
+              + attr("lineOrder", "lineOrder", b"\0")
+              + attr("pixelAspectRatio", "float", struct.pack("<f", 1.0))
+              + attr("screenWindowCenter", "v2f", struct.pack("<2f", 0, 0))
+              + attr("screenWindowWidth", "float", struct.pack("<f", 1.0))
+              + b"\0")
+    fmt = {0: "I", 1: "e", 2: "f"}
+    lines = []
+    for y in range(height):
+        row = b"".join(struct.pack("<%d%s" % (width, fmt[t]), *v[y * width:(y + 1) * width])
+                       for _, t, v in channels)
+        lines.append(struct.pack("<ii", y0 + y, len(row)) + row)
+    offset = len(header) + 8 * height
+    table = b""
+    for line in lines:
+        table += struct.pack("<Q", offset)
+        offset += len(line)
+    return header + table + b"".join(lines)
+
+
+def exr_seeds():
+    """Hit-position, colour and part EXRs as snell writes them (rendered by
+    target/release/snell when it is built), and hand-written uncompressed
+    ones with other pixel types."""
+    w, h = 4, 3
+    n = w * h
+    u = [0.25 * i for i in range(n)]
+    v = [-0.5 * i for i in range(n)]
+    events = [float(i % 3) for i in range(n)]
+    write("exr", "hits-float.exr", exr([("u", 2, u), ("v", 2, v), ("events", 2, events)], w, h))
+    write("exr", "hits-part.exr", exr([("u", 2, u), ("v", 2, v), ("events", 2, events)],
+                                      w, h, origin=(2, 5), full=(8, 9)))
+    write("exr", "rgb-half.exr", exr([(c, 1, [i / n for i in range(n)]) for c in "RGB"], w, h))
+    write("exr", "rgb-uint.exr", exr([(c, 0, list(range(n))) for c in "RGB"], w, h))
+    for name, data in snell_outputs().items():
+        if name.endswith(".exr"):
+            write("exr", name, data)
+
+
+def snell_outputs():
+    """An 8×8 render of the sphere scene, whole and as a region, by
+    target/release/snell if it is built: {file name: bytes} of its PNGs,
+    colour EXRs and hit EXRs."""
+    snell = os.path.join(ROOT, "target", "release", "snell")
+    if not os.path.exists(snell):
+        print("no target/release/snell: no seeds of snell's own images", file=sys.stderr)
+        return {}
+    import subprocess
+    import tempfile
+    scene = os.path.join(ROOT, "scenes", "sphere.toml")
+    files = {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for name, extra in [("frame", []), ("region", ["--region", "2,3,6,7"])]:
+            out = {"snell-%s%s" % (name, suffix): os.path.join(tmp, name + suffix)
+                   for suffix in [".png", ".exr", "-hits.exr"]}
+            subprocess.run([snell, "render", scene, "--set", "image.width=8", "--set",
+                            "image.height=8", "-q", "-o", out["snell-%s.png" % name],
+                            "--exr", out["snell-%s.exr" % name],
+                            "--hits", out["snell-%s-hits.exr" % name]] + extra,
+                           check=True, capture_output=True)
+            files.update((k, open(v, "rb").read()) for k, v in out.items())
+    return files
+
+
+def png(width, height, color_type, depth, rows, palette=None):
+    """A PNG of raw rows (each with its filter byte added)."""
+    def chunk(kind, data):
+        return (struct.pack(">I", len(data)) + kind + data
+                + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF))
+
+    body = b"".join(b"\0" + r for r in rows)
+    out = b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", struct.pack(">IIBBBBB", width, height, depth,
+                                                              color_type, 0, 0, 0))
+    if palette:
+        out += chunk(b"PLTE", palette)
+    return out + chunk(b"IDAT", zlib.compress(body)) + chunk(b"IEND", b"")
+
+
+def photo_seeds():
+    """Small PNGs of each colour type and depth, and the repository's
+    photograph (a JPEG) whole and cut short."""
+    w, h = 5, 4
+    write("photo", "rgb8.png", png(w, h, 2, 8, [bytes(c for x in range(w) for c in (x * 50, y * 60, 128))
+                                               for y in range(h)]))
+    write("photo", "gray8.png", png(w, h, 0, 8, [bytes(range(y, y + w)) for y in range(h)]))
+    write("photo", "rgba16.png", png(w, h, 6, 16, [struct.pack(">%dH" % (4 * w), *range(4 * w))
+                                                   for _ in range(h)]))
+    write("photo", "palette.png", png(w, h, 3, 8, [bytes(x % 3 for x in range(w)) for _ in range(h)],
+                                      palette=bytes(range(9))))
+    jpeg = open(os.path.join(ROOT, "scenes", "photo.jpg"), "rb").read()
+    write("photo", "photo.jpg", jpeg)
+    write("photo", "photo-truncated.jpg", jpeg[:len(jpeg) // 2])
+    for name, data in snell_outputs().items():
+        if name.endswith(".png"):
+            write("photo", name, data)
+
+
 if __name__ == "__main__":
     nrrd_seeds()
     nifti_seeds()
     raw_seeds()
     metaimage_seeds()
     scene_seeds()
+    exr_seeds()
+    photo_seeds()
     for t in sorted(os.listdir(OUT)):
         files = os.listdir(os.path.join(OUT, t))
         total = sum(os.path.getsize(os.path.join(OUT, t, f)) for f in files)

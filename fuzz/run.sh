@@ -2,7 +2,7 @@
 # Fuzzes every target (or the ones named) for SECONDS each, one after the
 # other, and prints a markdown table of executions per target.
 #
-#   fuzz/run.sh 40          # the CI-sized run (.ci/run): 6 x 40 s
+#   fuzz/run.sh 40          # the CI-sized run (.ci/run): 8 x 40 s
 #   fuzz/run.sh 300         # the long run (docs/robustness.md)
 #   fuzz/run.sh 60 nrrd     # one target
 #
@@ -29,7 +29,7 @@ case "$secs" in
 esac
 targets=("$@")
 if [ ${#targets[@]} -eq 0 ]; then
-  targets=(nrrd nhdr nifti metaimage raw scene)
+  targets=(nrrd nhdr nifti metaimage raw scene exr photo)
 fi
 timeout_s=${FUZZ_TIMEOUT:-30}
 

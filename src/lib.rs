@@ -20,6 +20,7 @@ pub mod film;
 pub mod filter;
 pub mod heap;
 pub mod human;
+pub mod input;
 pub mod lattice;
 pub mod octree;
 pub mod peer;

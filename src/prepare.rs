@@ -738,7 +738,7 @@ fn read_field<T: Coefficient>(
     filter: FilterKind,
     dims: [usize; 3],
 ) -> std::io::Result<Field<T>> {
-    let mut r = std::io::BufReader::new(std::fs::File::open(path)?);
+    let mut r = std::io::BufReader::new(crate::input::open(path)?);
     if &read_exact_vec(&mut r, 8)?[..] != FIELD_MAGIC {
         return Err(bad("not a coefficient cache file"));
     }
@@ -791,7 +791,7 @@ fn write_tags(w: &mut dyn Write, t: &Tags) -> std::io::Result<()> {
 }
 
 fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<Tags> {
-    let mut r = std::io::BufReader::new(std::fs::File::open(path)?);
+    let mut r = std::io::BufReader::new(crate::input::open(path)?);
     if &read_exact_vec(&mut r, 8)?[..] != TAGS_MAGIC {
         return Err(bad("not a tags cache file"));
     }

@@ -627,6 +627,15 @@ fn bad_inputs_fail_cleanly_without_output() {
         .write_to(&mut std::io::Cursor::new(&mut png), image::ImageFormat::Png)
         .unwrap();
     t.write("bd.png", &png);
+    // The same PNG with its header claiming 100000 × 100000 pixels (the
+    // header's CRC made to match).
+    let mut huge_png = png.clone();
+    huge_png[16..24]
+        .copy_from_slice(&[100_000u32.to_be_bytes(), 100_000u32.to_be_bytes()].concat());
+    let mut crc = flate2::Crc::new();
+    crc.update(&huge_png[12..29]);
+    huge_png[29..33].copy_from_slice(&crc.sum().to_be_bytes());
+    t.write("huge.png", &huge_png);
     t.write(
         "bd.toml",
         photo_scene.replace("photo.jpg", "bd.png").as_bytes(),
@@ -643,6 +652,15 @@ fn bad_inputs_fail_cleanly_without_output() {
             .unwrap();
         assert!(o.status.success(), "{}", stderr(&o));
     }
+    // A part whose header claims 10^10 pixels in a file of a few hundred
+    // bytes: refused from the header, before the reader allocates them.
+    let mut huge = std::fs::read(t.path("k0.exr")).unwrap();
+    let key = b"dataWindow\0box2i\0";
+    let at = huge.windows(key.len()).position(|w| w == key).unwrap() + key.len() + 4;
+    for (i, v) in [0i32, 0, 99_999, 99_999].into_iter().enumerate() {
+        huge[at + 4 * i..at + 4 * i + 4].copy_from_slice(&v.to_le_bytes());
+    }
+    t.write("huge.exr", &huge);
     scene_file(&t, "section.toml", |s| {
         s.replace("[volume.phantom]", "[volume.phantomx]")
     });
@@ -784,9 +802,11 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "unknown subcommand", "frobnicate", &["frobnicate"]),
         bad("file", "compare: not an EXR", "compare notexr.exr notexr.exr", &["notexr.exr"]),
         bad("file", "compare: EXR missing", "compare nothere.exr notexr.exr", &["nothere.exr"]),
-        bad("file", "compare: hits against a missing file", "compare k0.exr nothere.exr", &["nothere.exr", "k0.exr"]),
+        bad("file", "compare: hits against a missing file", "compare k0.exr nothere.exr", &["nothere.exr", "No such file"]),
         bad("file", "compare: hits of two regions", "compare k0.exr k1.exr", &["k0.exr", "k1.exr", "different regions"]),
         bad("flag", "compare --diff of hits", "compare k0.exr k0.exr --diff d.png", &["--diff"]),
+        bad("file", "merge: an EXR header claiming 10^10 pixels", "merge huge.exr -o out.exr", &["huge.exr", "100000x100000", "limit"]),
+        bad("file", "compare: an EXR header claiming 10^10 pixels", "compare huge.exr k0.exr", &["huge.exr", "100000x100000", "limit"]),
         bad("scene", "required key missing", "render nokey.toml -o out.png", &["nokey.toml", "iso"]),
         bad("scene", "unknown filter", "render filter.toml -o out.png", &["filter.toml", "surface.filter", "gaussian"]),
         bad("scene", "camera look_at at its own position", "render samepos.toml -o out.png", &["samepos.toml", "[camera.look_at]"]),
@@ -832,6 +852,8 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "reference of a sphere its grid clips", "reference {sphere} --hits h.exr --set volume.phantom.size=16", &["does not fit"]),
         bad("scene", "spacing ratio beyond 1e6", "render {sphere} -o out.png --set volume.spacing=[1e-15,1,1]", &["volume.spacing", "1e6"]),
         bad("scene", "a JPEG backdrop cut short", "render cut.toml -o out.png", &["cut.jpg", "end-of-image"]),
+        bad("file", "compare: a JPEG cut short", "compare cut.jpg cut.jpg", &["cut.jpg", "end-of-image"]),
+        bad("file", "compare: a PNG header claiming 10^10 pixels", "compare huge.png bd.png", &["huge.png", "100000x100000"]),
         Bad {
             env: Some(("SNELL_MEMORY_LIMIT", "4M")),
             ..bad("scene", "photograph over SNELL_MEMORY_LIMIT=4M", "render {photo} -o out.png --set image.width=16 --set image.height=16", &["photo.jpg", "limit"])
@@ -1218,12 +1240,13 @@ fn hits_are_bitwise_identical_across_threads_and_tiles() {
     }
 }
 
-/// A volume that is a FIFO (or names one as its data file) is refused at
-/// once instead of waiting for a writer forever, by every reader; so is a
-/// device. Each command must end within seconds.
+/// An input that is a FIFO (a volume, a volume's data file, a scene, a
+/// photograph, an image or EXR, a points file) is refused at once instead
+/// of waiting for a writer forever, by every reader; so is a device. Each
+/// command must end within seconds.
 #[cfg(unix)]
 #[test]
-fn volumes_that_are_not_files_are_refused_without_waiting() {
+fn inputs_that_are_not_files_are_refused_without_waiting() {
     let t = Tmp::new("fifo");
     let fifo = |name: &str| {
         let p = t.path(name);
@@ -1262,6 +1285,30 @@ fn volumes_that_are_not_files_are_refused_without_waiting() {
             .map(String::from)
             .to_vec(),
     );
+    // The other inputs: a scene, a backdrop photograph, images and hit
+    // EXRs to compare, parts to merge, points to sample.
+    let s = |p: PathBuf| p.to_str().unwrap().to_string();
+    let scene = s(fifo("scene.toml"));
+    let photo = s(fifo("photo.jpg"));
+    let (png, exr) = (s(fifo("a.png")), s(fifo("a.exr")));
+    let points = s(fifo("points.csv"));
+    let out = s(t.path("out.exr"));
+    let sphere = s(root().join("scenes/sphere-photo.toml"));
+    let set_photo = format!("backdrop.image={photo}");
+    let volume = s(t.write(
+        "v2.nrrd",
+        b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n\0\0\0\0\0\0\0\0",
+    ));
+    for args in [
+        vec!["render", &scene, "-o", &out],
+        vec!["render", &sphere, "--set", &set_photo, "-o", &out],
+        vec!["compare", &png, &png],
+        vec!["compare", &exr, &exr],
+        vec!["merge", &exr, "-o", &out],
+        vec!["sample", &volume, "--filter", "linear", "--points", &points],
+    ] {
+        cases.push(args.into_iter().map(String::from).collect());
+    }
     for args in cases {
         let mut child = bin()
             .args(&args)

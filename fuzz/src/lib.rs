@@ -12,6 +12,19 @@ use snell::volume::{LoadOptions, Volume, VolumeError};
 /// enough that a hostile header is refused long before libFuzzer's RSS limit.
 pub const MEMORY_LIMIT: u64 = 16 << 20;
 
+/// Sets `SNELL_MEMORY_LIMIT` to [`MEMORY_LIMIT`] for the readers that take
+/// their limit from it (images, EXRs, photographs), so a hostile header is
+/// refused long before libFuzzer's RSS limit. Call it first in a target.
+pub fn limit_memory() {
+    static ONCE: std::sync::Once = std::sync::Once::new();
+    ONCE.call_once(|| {
+        // SAFETY: called on the fuzzer's thread before the target has
+        // started any other thread (the first input's call), so nothing
+        // reads the environment meanwhile.
+        unsafe { std::env::set_var("SNELL_MEMORY_LIMIT", MEMORY_LIMIT.to_string()) };
+    });
+}
+
 /// A directory private to this process, under `$SNELL_FUZZ_SCRATCH` or
 /// else on tmpfs when there is one.
 pub fn scratch() -> &'static Path {

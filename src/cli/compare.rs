@@ -36,8 +36,14 @@ pub struct Args {
     pub json: bool,
 }
 
-fn is_hit_image(p: &Path) -> bool {
-    p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) && HitImage::read_exr(p).is_ok()
+/// A hit-position EXR's hits and place in its frame; `None` for a colour
+/// image (PNG, JPEG, or an EXR without the hit channels). An EXR that does
+/// not read is an error here, with the reader's reason.
+fn read_hits(p: &Path) -> anyhow::Result<Option<(HitImage, [i32; 2])>> {
+    if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+        return Ok(None);
+    }
+    Ok(HitImage::read_exr_if_hits(p)?)
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
@@ -46,17 +52,18 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         check_format(d, "--diff", &["png"])?;
         check_distinct(&[d], &[&a.a, &a.b])?;
     }
-    let (hit_a, hit_b) = (is_hit_image(&a.a), is_hit_image(&a.b));
+    let (hits_a, hits_b) = (read_hits(&a.a)?, read_hits(&a.b)?);
+    let (hit_a, hit_b) = (hits_a.is_some(), hits_b.is_some());
     if hit_a != hit_b {
         let (hit, other) = if hit_a { (&a.a, &a.b) } else { (&a.b, &a.a) };
         anyhow::bail!(
-            "{} is a hit-position EXR but {} is not (missing, a colour image, or without u, v, events channels): compare hits with hits, colour images with colour images",
+            "{} is a hit-position EXR but {} is not (a colour image, or an EXR without u, v, events channels): compare hits with hits, colour images with colour images",
             hit.display(),
             other.display()
         );
     }
     // Options of the other kind of comparison would be ignored silently.
-    if hit_a {
+    if let (Some((ha, at_a)), Some((hb, at_b))) = (hits_a, hits_b) {
         anyhow::ensure!(
             a.diff.is_none(),
             "--diff draws colour differences; {} and {} are hit-position EXRs",
@@ -87,8 +94,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 "--checker must be a finite number > 0, got {c}"
             );
         }
-        let (ha, at_a) = HitImage::read_exr_placed(&a.a)?;
-        let (hb, at_b) = HitImage::read_exr_placed(&a.b)?;
         // Parts of a frame (`render --region`) of one size but from different
         // places would be compared pixel by pixel as if they were one place.
         anyhow::ensure!(

@@ -101,7 +101,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let points = if name == "-" {
         parse_points(std::io::stdin().lock(), "stdin")?
     } else {
-        let f = std::fs::File::open(&a.points).with_context(|| name.clone())?;
+        let f = snell::input::open(&a.points).with_context(|| name.clone())?;
         parse_points(BufReader::new(f), &name)?
     };
     let vol = a.vol.load(&a.volume)?;

@@ -8,8 +8,6 @@
 
 use std::path::{Path, PathBuf};
 
-use exr::prelude::read_first_flat_layer_from_file;
-
 use super::{FilmError, Placement, to_u8, write_exr_placed, write_png_rgb};
 
 /// One part as read: where it sits and its channels (sorted by name).
@@ -72,7 +70,7 @@ pub fn read_part(path: &Path) -> Result<Part, MergeError> {
         path: path.to_path_buf(),
         msg,
     };
-    let image = read_first_flat_layer_from_file(path).map_err(|e| FilmError::Read {
+    let image = super::read_exr_layer(path).map_err(|e| FilmError::Read {
         path: path.to_path_buf(),
         msg: format!("not a readable OpenEXR part ({e})"),
     })?;

@@ -9,7 +9,7 @@ use std::path::Path;
 
 use serde::Serialize;
 
-use super::{FilmError, read_first_flat_layer_from_file};
+use super::{FilmError, read_exr_layer};
 
 /// An RGB image in [0, 1] (row 0 at the top).
 #[derive(Clone, Debug, PartialEq)]
@@ -30,7 +30,7 @@ impl RgbImage {
             .extension()
             .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
         if is_exr {
-            let image = read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
+            let image = read_exr_layer(path).map_err(err)?;
             let layer = &image.layer_data;
             let ch = |name: &str| -> Result<Vec<f32>, FilmError> {
                 layer
@@ -48,18 +48,7 @@ impl RgbImage {
                 pixels: (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect(),
             });
         }
-        let img = image::ImageReader::open(path)
-            .map_err(|e| err(e.to_string()))?
-            .with_guessed_format()
-            .map_err(|e| err(e.to_string()))?
-            .decode()
-            .map_err(|e| err(e.to_string()))?
-            .to_rgb32f();
-        Ok(RgbImage {
-            width: img.width(),
-            height: img.height(),
-            pixels: img.pixels().map(|p| p.0).collect(),
-        })
+        super::photo::read(path).map_err(err)
     }
 }
 

@@ -12,6 +12,7 @@ pub(crate) mod hitmap;
 mod interior;
 pub mod merge;
 pub mod metrics;
+pub mod photo;
 pub mod prss;
 
 use std::marker::PhantomData;
@@ -19,11 +20,58 @@ use std::path::{Path, PathBuf};
 
 use exr::prelude::{
     AnyChannel, AnyChannels, Encoding, FlatSamples, Image, ImageAttributes, IntegerBounds, Layer,
-    LayerAttributes, SmallVec, Vec2, WritableImage, read_first_flat_layer_from_file,
+    LayerAttributes, SmallVec, Vec2, WritableImage,
 };
 
 use crate::atomic::write_atomic;
 use crate::render::tile::{Pixels, Region, Tile, TileOut};
+use crate::volume::limits::{default_memory_limit, human_bytes};
+
+/// Reads an EXR's first flat layer with all its channels, from a file
+/// opened as every input is ([`crate::input::open`]). The headers are read
+/// first and an image whose samples would not fit the memory limit
+/// ([`default_memory_limit`]) is refused before any of them is allocated:
+/// a header of a few hundred bytes can claim a data window of terapixels,
+/// and the reader would allocate it at once.
+pub(crate) fn read_exr_layer(
+    path: &Path,
+) -> Result<Image<Layer<AnyChannels<FlatSamples>>>, String> {
+    use exr::image::read::{image::ReadLayers, layers::ReadChannels};
+    use std::io::{Seek, SeekFrom};
+    let file = crate::input::open(path).map_err(|e| e.to_string())?;
+    let mut reader = std::io::BufReader::new(file);
+    let meta =
+        exr::meta::MetaData::read_from_buffered(&mut reader, false).map_err(|e| e.to_string())?;
+    let limit = default_memory_limit();
+    for header in &meta.headers {
+        let size = header.layer_size;
+        let channels = header.channels.list.len() as u64;
+        // The reader's samples (at most 4 bytes each) and the 32-bit copy
+        // the callers take of them.
+        let need = (size.0 as u64)
+            .saturating_mul(size.1 as u64)
+            .saturating_mul(channels)
+            .saturating_mul(8);
+        if need > limit {
+            return Err(format!(
+                "an image of {}x{} pixels with {channels} channels needs about {} of memory to read, over the limit of {} (SNELL_MEMORY_LIMIT raises it)",
+                size.0,
+                size.1,
+                human_bytes(need),
+                human_bytes(limit)
+            ));
+        }
+    }
+    reader.seek(SeekFrom::Start(0)).map_err(|e| e.to_string())?;
+    exr::prelude::read()
+        .no_deep_data()
+        .largest_resolution_level()
+        .all_channels()
+        .first_valid_layer()
+        .all_attributes()
+        .from_buffered(reader)
+        .map_err(|e| e.to_string())
+}
 
 #[derive(Debug, thiserror::Error)]
 pub enum FilmError {
@@ -416,31 +464,43 @@ impl HitImage {
     /// frame (the EXR's data window): a part rendered with `--region`
     /// starts where its region does.
     pub fn read_exr_placed(path: &Path) -> Result<(HitImage, [i32; 2]), FilmError> {
-        let err = |msg: String| FilmError::Read {
+        HitImage::read_exr_if_hits(path)?.ok_or_else(|| FilmError::Read {
             path: path.to_path_buf(),
-            msg,
-        };
-        let image = read_first_flat_layer_from_file(path).map_err(|e| err(e.to_string()))?;
+            msg: "no channels u, v, events (not a hit-position image)".into(),
+        })
+    }
+
+    /// [`HitImage::read_exr_placed`] for an EXR that may hold something
+    /// else: `None` if it lacks any of the channels `u`, `v`, `events` (a
+    /// colour image), an error only if it is not a readable EXR.
+    pub fn read_exr_if_hits(path: &Path) -> Result<Option<(HitImage, [i32; 2])>, FilmError> {
+        let image = read_exr_layer(path).map_err(|e| FilmError::Read {
+            path: path.to_path_buf(),
+            msg: e.to_string(),
+        })?;
         let layer = &image.layer_data;
         let size = layer.size;
-        let channel = |name: &str| -> Result<Vec<f32>, FilmError> {
+        let channel = |name: &str| -> Option<Vec<f32>> {
             layer
                 .channel_data
                 .list
                 .iter()
                 .find(|c| c.name.eq(name))
                 .map(|c| c.sample_data.values_as_f32().collect())
-                .ok_or_else(|| err(format!("no channel '{name}' (not a hit-position image)")))
+        };
+        let (Some(u), Some(v), Some(events)) = (channel("u"), channel("v"), channel("events"))
+        else {
+            return Ok(None);
         };
         let hits = HitImage {
             width: size.width() as u32,
             height: size.height() as u32,
-            u: channel("u")?,
-            v: channel("v")?,
-            events: channel("events")?,
+            u,
+            v,
+            events,
         };
         let at = layer.attributes.layer_position;
-        Ok((hits, [at.x(), at.y()]))
+        Ok(Some((hits, [at.x(), at.y()])))
     }
 }
 

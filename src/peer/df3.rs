@@ -223,7 +223,7 @@ pub struct Df3 {
 /// Reads a DF3 file (any sample width), inferring the width from the size as
 /// POV-Ray does.
 pub fn read_df3(path: &Path) -> Result<Df3, PeerError> {
-    let bytes = std::fs::read(path).map_err(|e| PeerError::io(path, e))?;
+    let bytes = crate::input::read(path).map_err(|e| PeerError::io(path, e))?;
     let bad = |msg: String| PeerError::Format {
         path: path.to_path_buf(),
         msg,

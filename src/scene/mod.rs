@@ -615,7 +615,7 @@ impl Scene {
 
     /// Reads, overrides and validates a scene file.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
-        let text = std::fs::read_to_string(path).map_err(|source| SceneError::Io {
+        let text = crate::input::read_to_string(path).map_err(|source| SceneError::Io {
             path: path.to_path_buf(),
             source,
         })?;
@@ -1709,129 +1709,21 @@ fn check_color(c: &[f32; 3]) -> Result<(), String> {
     }
 }
 
-/// Loads a PNG/JPEG photograph as an RGB texture in `[0, 1]`.
+/// Loads a photograph as an RGB texture in `[0, 1]`.
 fn load_texture(path: &Path, world_width: f64, outside: [f32; 3]) -> Result<Texture, String> {
-    let img = image::ImageReader::open(path)
-        .map_err(|e| format!("{}: {e}", path.display()))?
-        .with_guessed_format()
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    let (w, h) = img
-        .into_dimensions()
-        .map_err(|e| format!("{}: {e}", path.display()))?;
-    if w == 0 || h == 0 || (w as u64) * (h as u64) > MAX_IMAGE_PIXELS {
-        return Err(format!(
-            "{}: image size {w}x{h} not supported",
-            path.display()
-        ));
-    }
-    // Decoding holds the decoded image (3 bytes a pixel), its float copy and
-    // the texels (12 each): 27 bytes a pixel by those buffers' sizes (the
-    // decoder's own scratch not counted), from a file that may be a few
-    // kilobytes.
-    let need = (w as u64) * (h as u64) * 27;
-    let limit = crate::volume::limits::default_memory_limit();
-    if need > limit {
-        let hb = crate::volume::limits::human_bytes;
-        return Err(format!(
-            "{}: a {w}x{h} photograph needs about {} of memory to decode, over the limit of {}; use a smaller image or raise SNELL_MEMORY_LIMIT",
-            path.display(),
-            hb(need),
-            hb(limit)
-        ));
-    }
-    check_jpeg_end(path)?;
-    let img = image::ImageReader::open(path)
-        .and_then(|r| r.with_guessed_format())
-        .map_err(|e| format!("{}: {e}", path.display()))?
-        .decode()
-        .map_err(|e| format!("{}: {e}", path.display()))?
-        .to_rgb32f();
-    let pixels = img.pixels().map(|p| p.0).collect();
+    let photo = crate::film::photo::read(path).map_err(|m| format!("{}: {m}", path.display()))?;
     Ok(Texture {
-        width_px: w as usize,
-        height_px: h as usize,
-        pixels,
+        width_px: photo.width as usize,
+        height_px: photo.height as usize,
+        pixels: photo.pixels,
         world_width,
         outside,
     })
 }
 
-/// A JPEG cut short decodes without complaint (the missing rows come out
-/// grey), so its markers are walked from the start to the end-of-image
-/// marker that closes the image: segments by their lengths, entropy-coded
-/// data byte by byte. What follows that marker (a phone's motion-photo
-/// video, a trailer) is not looked at. Files that are not JPEGs pass.
-fn check_jpeg_end(path: &Path) -> Result<(), String> {
-    let bytes = std::fs::read(path).map_err(|e| format!("{}: {e}", path.display()))?;
-    if !bytes.starts_with(&[0xFF, 0xD8]) {
-        return Ok(());
-    }
-    if jpeg_has_end(&bytes) {
-        Ok(())
-    } else {
-        Err(format!(
-            "{}: JPEG without its end-of-image marker (a truncated file?)",
-            path.display()
-        ))
-    }
-}
-
-/// Whether the JPEG in `b` (starting with SOI) reaches its EOI marker.
-fn jpeg_has_end(b: &[u8]) -> bool {
-    let mut i = 2;
-    let mut in_scan = false;
-    while i + 1 < b.len() {
-        if b[i] != 0xFF {
-            if !in_scan {
-                return false; // not at a marker outside entropy-coded data
-            }
-            i += 1;
-            continue;
-        }
-        let m = b[i + 1];
-        match m {
-            // Stuffed zero, restart markers, fill bytes: still in the scan.
-            0x00 | 0xD0..=0xD7 | 0xFF if in_scan => i += if m == 0xFF { 1 } else { 2 },
-            0xD9 => return true,
-            0xFF => i += 1,
-            0x01 | 0xD0..=0xD7 => i += 2,
-            _ => {
-                // A segment with its length; SOS starts entropy-coded data.
-                if i + 3 >= b.len() {
-                    return false;
-                }
-                let len = u16::from_be_bytes([b[i + 2], b[i + 3]]) as usize;
-                if len < 2 {
-                    return false;
-                }
-                i += 2 + len;
-                in_scan = m == 0xDA;
-            }
-        }
-    }
-    false
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn jpeg_end_is_found_past_segments_and_scans() {
-        let jpeg = std::fs::read(
-            std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/photo.jpg"),
-        )
-        .unwrap();
-        assert!(jpeg_has_end(&jpeg));
-        // Data after the image (a motion photo's video) does not matter.
-        let mut trailed = jpeg.clone();
-        trailed.extend(std::iter::repeat_n(0x42, 100_000));
-        assert!(jpeg_has_end(&trailed));
-        // Cut anywhere before its end, it is refused.
-        for cut in [4, 100, jpeg.len() / 3, jpeg.len() / 2, jpeg.len() - 2] {
-            assert!(!jpeg_has_end(&jpeg[..cut]), "cut at {cut}");
-        }
-    }
 
     const SCENE: &str = r#"
 [image]

@@ -166,34 +166,10 @@ impl Deref for FileBytes {
     }
 }
 
-/// Opens a file samples are read from, refusing what is not a regular
-/// file: opening a FIFO would wait for a writer forever (it is opened
-/// without waiting, then looked at), and the readers map or stream bytes
-/// that a socket or device does not hold as a file does.
+/// Opens a file samples are read from; see [`crate::input::open`] for
+/// why only regular files are.
 pub(super) fn open_file(path: &Path) -> io::Result<File> {
-    let mut options = std::fs::OpenOptions::new();
-    options.read(true);
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::OpenOptionsExt;
-        // No effect on a regular file's reads or maps.
-        options.custom_flags(libc::O_NONBLOCK);
-    }
-    let file = options.open(path)?;
-    let meta = file.metadata()?;
-    if meta.is_dir() {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "is a directory",
-        ));
-    }
-    if !meta.is_file() {
-        return Err(io::Error::new(
-            io::ErrorKind::InvalidInput,
-            "not a regular file (a FIFO, socket or device); volumes are read from files",
-        ));
-    }
-    Ok(file)
+    crate::input::open(path)
 }
 
 /// Maps `file` read-only so samples decode straight from the page cache.
