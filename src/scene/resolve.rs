@@ -1,0 +1,584 @@
+//! From the file's sections to a validated [`Scene`]: every value checked
+//! with its key named, relative paths resolved beside the scene file, the
+//! photograph loaded, and the settings that would have no effect listed.
+
+use std::path::Path;
+
+use glam::DVec3;
+
+use super::file::{CameraKind, SceneFile, default_tile};
+use super::words::{plain_serde_message, plain_value};
+use super::{
+    Backdrop, Camera, CameraError, DEFAULT_CLASSIFY, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MIN_STEP,
+    Pattern, Projection, RenderSettings, Scene, SceneError, Supersampling, Surface, Texture,
+    Traversal, VolumeSource, unit_scale,
+};
+use crate::classify::Method;
+use crate::filter::FilterKind;
+use crate::phantom::PhantomSpec;
+use crate::volume::{Endian, RawSpec, SampleType};
+
+fn vec3(v: [f64; 3]) -> DVec3 {
+    DVec3::from_array(v)
+}
+
+/// Reads `[volume.phantom]`: its `kind`, then the kind's settings, each
+/// error with the key inside the table (`volume.phantom.size`).
+pub(super) fn phantom_spec(v: toml::Value) -> Result<PhantomSpec, (String, String)> {
+    let toml::Value::Table(mut t) = v else {
+        return Err((
+            "volume.phantom".into(),
+            format!(
+                "expected a table of phantom settings, got {}",
+                plain_value(&v)
+            ),
+        ));
+    };
+    let kind = t.remove("kind");
+    fn read<T: serde::de::DeserializeOwned>(t: toml::Table) -> Result<T, (String, String)> {
+        serde_path_to_error::deserialize(toml::Value::Table(t)).map_err(|e| {
+            let key = e.path().to_string();
+            let key = if key == "." {
+                "volume.phantom".to_string()
+            } else {
+                format!("volume.phantom.{key}")
+            };
+            (key, plain_serde_message(e.into_inner().message()))
+        })
+    }
+    match kind.as_ref().and_then(|k| k.as_str()) {
+        Some("sphere") => Ok(PhantomSpec::Sphere(read(t)?)),
+        Some("marschner-lobb") => Ok(PhantomSpec::MarschnerLobb(read(t)?)),
+        _ => Err((
+            "volume.phantom.kind".into(),
+            match kind {
+                None => "missing: give kind = \"sphere\" or \"marschner-lobb\"".into(),
+                Some(k) => format!(
+                    "expected \"sphere\" or \"marschner-lobb\", got {}",
+                    plain_value(&k)
+                ),
+            },
+        )),
+    }
+}
+
+/// The settings in `written` that the resolved scene does not use, as
+/// messages (see [`Scene::ignored_settings`]).
+pub(super) fn ignored_settings(
+    written: &[(String, String)],
+    f: &SceneFile,
+    surface: &Surface,
+    render: &RenderSettings,
+) -> Vec<String> {
+    let mut unused: Vec<(&str, String)> = Vec::new();
+    match f.camera.kind {
+        CameraKind::Perspective => unused.push((
+            "camera.height",
+            "a perspective camera's view is set by fov_y (height is for kind = \"orthographic\")"
+                .into(),
+        )),
+        CameraKind::Orthographic => unused.push((
+            "camera.fov_y",
+            "an orthographic camera's view is set by height (fov_y is for the perspective camera)"
+                .into(),
+        )),
+    }
+    if f.backdrop.checker.is_some() {
+        for key in ["backdrop.width", "backdrop.outside"] {
+            unused.push((
+                key,
+                "it applies to a photograph backdrop (image), not to a checkerboard".into(),
+            ));
+        }
+    } else {
+        unused.push((
+            "backdrop.checker_colors",
+            "it applies to a checkerboard backdrop, not to a photograph".into(),
+        ));
+    }
+    if render.traversal != Traversal::Step {
+        unused.push((
+            "render.step",
+            format!(
+                "it is the step of traversal = \"step\"; the {} traversal finds crossings cell by cell",
+                setting_name(&render.traversal)
+            ),
+        ));
+    }
+    if render.supersampling == Supersampling::None {
+        for key in [
+            "render.samples",
+            "render.prss_samples",
+            "render.prss_map",
+            "render.prss_fallback",
+            "render.prss_curvature",
+            "render.footprint",
+            "render.seed",
+        ] {
+            unused.push((
+                key,
+                "render.supersampling is \"none\" (one ray per pixel); set it to grid, jitter, prss or footprint".into(),
+            ));
+        }
+    } else if render.supersampling != Supersampling::Footprint {
+        unused.push((
+            "render.footprint",
+            format!(
+                "it is the filter of supersampling = \"footprint\", not of \"{}\"",
+                setting_name(&render.supersampling)
+            ),
+        ));
+    }
+    if !surface.filter.smooths() {
+        unused.push((
+            "surface.lambda",
+            format!(
+                "it is the smoothing weight of smooth-bspline3; filter {} does not smooth",
+                surface.filter.name()
+            ),
+        ));
+    }
+    unused
+        .into_iter()
+        .filter_map(|(key, why)| {
+            let (_, value) = written.iter().find(|(k, _)| k == key)?;
+            Some(match value.strip_prefix("--set ") {
+                Some(_) => format!("{value} is ignored: {why}"),
+                None => format!("[{key}] = {value} is ignored: {why}"),
+            })
+        })
+        .collect()
+}
+
+/// The name a setting's unit variant has in scene files and reports
+/// (`"octree"`): the one serde reads and writes.
+pub(crate) fn setting_name<T: serde::Serialize>(v: &T) -> String {
+    match serde_json::to_value(v) {
+        Ok(serde_json::Value::String(s)) => s,
+        _ => "?".into(),
+    }
+}
+
+pub(super) fn resolve(
+    f: SceneFile,
+    phantom: Option<PhantomSpec>,
+    path: &Path,
+    written: &[(String, String)],
+) -> Result<Scene, SceneError> {
+    let bad = |key: &str, msg: String| SceneError::Key {
+        path: path.to_path_buf(),
+        key: key.to_string(),
+        msg,
+    };
+    let base = path.parent().unwrap_or(Path::new("."));
+
+    // [image]
+    let (w, h) = (f.image.width, f.image.height);
+    for (key, side) in [("image.width", w), ("image.height", h)] {
+        if side == 0 || side > MAX_IMAGE_SIDE {
+            return Err(bad(
+                key,
+                format!("must be from 1 to {MAX_IMAGE_SIDE} pixels, got {side}"),
+            ));
+        }
+    }
+    if (w as u64) * (h as u64) > MAX_IMAGE_PIXELS {
+        // Named by the longer side, the one most over its share.
+        return Err(bad(
+            if w >= h {
+                "image.width"
+            } else {
+                "image.height"
+            },
+            format!("{w}x{h} exceeds {MAX_IMAGE_PIXELS} pixels"),
+        ));
+    }
+    check_color(&f.image.background).map_err(|m| bad("image.background", m))?;
+
+    // [camera]
+    let c = &f.camera;
+    let projection = match c.kind {
+        CameraKind::Perspective => {
+            let fov = c.fov_y.ok_or_else(|| {
+                bad(
+                    "camera.fov_y",
+                    "a perspective camera needs fov_y (degrees)".into(),
+                )
+            })?;
+            if !(fov > 0.0 && fov < 180.0) {
+                return Err(bad(
+                    "camera.fov_y",
+                    format!("must be between 0 and 180 degrees (both excluded), got {fov}"),
+                ));
+            }
+            Projection::Perspective {
+                tan_half_fov: (fov.to_radians() / 2.0).tan(),
+            }
+        }
+        CameraKind::Orthographic => {
+            let height = c.height.ok_or_else(|| {
+                bad(
+                    "camera.height",
+                    "an orthographic camera needs height (world units)".into(),
+                )
+            })?;
+            Projection::Orthographic {
+                half_height: height / 2.0,
+            }
+        }
+    };
+    let camera = Camera::new(
+        vec3(c.position),
+        vec3(c.look_at),
+        vec3(c.up),
+        projection,
+        w,
+        h,
+    )
+    .map_err(|e| {
+        let key = match e {
+            CameraError::NotFinite(what) | CameraError::TooFar { what, .. } => {
+                format!("camera.{what}")
+            }
+            CameraError::BadHeight(_) | CameraError::ViewOverflow
+                if c.kind == CameraKind::Orthographic =>
+            {
+                "camera.height".into()
+            }
+            CameraError::BadFov(_) => "camera.fov_y".into(),
+            CameraError::UpParallel => "camera.up".into(),
+            // position is where the camera is; look_at is what it aims at.
+            CameraError::NoDirection => "camera.look_at".into(),
+            _ => "camera".into(),
+        };
+        bad(&key, e.to_string())
+    })?;
+
+    // [volume]
+    let v = &f.volume;
+    if let Some(sp) = v.spacing {
+        crate::volume::check_spacing(sp)
+            .and_then(|()| crate::volume::check_spacing_ratio(sp))
+            .map_err(|e| bad("volume.spacing", e.to_string()))?;
+    }
+    let volume = match (&v.path, &v.phantom) {
+        (Some(_), Some(_)) => {
+            return Err(bad(
+                "volume",
+                "give either path or [volume.phantom], not both".into(),
+            ));
+        }
+        (None, None) => return Err(bad("volume", "needs path or [volume.phantom]".into())),
+        (Some(p), None) => {
+            let raw = match &v.raw {
+                None => None,
+                Some(r) => Some(RawSpec {
+                    dims: r.dims,
+                    sample_type: SampleType::parse(&r.sample_type).ok_or_else(|| {
+                        bad(
+                            "volume.raw.type",
+                            format!("unknown sample type '{}'", r.sample_type),
+                        )
+                    })?,
+                    endian: Endian::parse(&r.endian).ok_or_else(|| {
+                        bad(
+                            "volume.raw.endian",
+                            format!("expected little or big, got '{}'", r.endian),
+                        )
+                    })?,
+                    spacing: v.spacing.unwrap_or([1.0; 3]),
+                    offset: r.offset,
+                }),
+            };
+            VolumeSource::File {
+                path: base.join(p),
+                raw,
+                allow_nan: v.allow_nan,
+            }
+        }
+        (None, Some(_)) => {
+            let spec = phantom.expect("a phantom table is read before resolving");
+            spec.validate().map_err(|e| match e {
+                crate::phantom::PhantomError::Setting { key, msg } => {
+                    bad(&format!("volume.phantom.{key}"), msg)
+                }
+                e => bad("volume.phantom", e.to_string()),
+            })?;
+            VolumeSource::Phantom(spec)
+        }
+    };
+    if let Some(s) = v.spacing
+        && !s.iter().all(|x| x.is_finite() && *x > 0.0)
+    {
+        return Err(bad(
+            "volume.spacing",
+            format!("must be finite and > 0, got {s:?}"),
+        ));
+    }
+
+    // [surface]
+    let s = &f.surface;
+    let filter = FilterKind::with_lambda(&s.filter, s.lambda).map_err(|e| match e {
+        crate::filter::FilterError::Unknown(_) => bad("surface.filter", e.to_string()),
+        crate::filter::FilterError::BadLambda(_) => bad("surface.lambda", e.to_string()),
+        crate::filter::FilterError::NeedsLambda => bad(
+            "surface.lambda",
+            format!(
+                "filter smooth-bspline3 needs lambda, {}",
+                crate::filter::LAMBDA_HELP
+            ),
+        ),
+    })?;
+    if !s.iso.is_finite() {
+        return Err(bad("surface.iso", format!("must be finite, got {}", s.iso)));
+    }
+    for (key, ior) in [
+        ("surface.ior", s.ior),
+        ("surface.outside_ior", s.outside_ior),
+    ] {
+        if !(ior.is_finite() && ior > 0.0) {
+            return Err(bad(
+                key,
+                format!("index of refraction must be a finite number > 0, got {ior}"),
+            ));
+        }
+    }
+    let surface = Surface {
+        filter,
+        iso: s.iso,
+        ior: s.ior,
+        outside_ior: s.outside_ior,
+    };
+
+    // [backdrop]
+    let b = &f.backdrop;
+    let center = vec3(b.center);
+    // Only their directions matter: scaled to a largest component of 1, huge
+    // vectors (1e155) square without overflowing to an infinite length.
+    let normal = unit_scale(vec3(b.normal));
+    let u_raw = unit_scale(vec3(b.u_axis));
+    if !(center.is_finite() && normal.is_finite() && u_raw.is_finite()) {
+        return Err(bad(
+            "backdrop",
+            "center, normal and u_axis must be finite".into(),
+        ));
+    }
+    if normal.length() < 1e-12 {
+        return Err(bad("backdrop.normal", "must not be zero".into()));
+    }
+    let normal = normal.normalize();
+    // Gram–Schmidt: keep u in the plane; SPEC's v = cross(normal, u) is then unit.
+    let u_in_plane = u_raw - u_raw.dot(normal) * normal;
+    if u_in_plane.length() < 1e-9 * u_raw.length().max(1e-300) || u_raw.length() == 0.0 {
+        return Err(bad(
+            "backdrop.u_axis",
+            "must not be zero or parallel to normal".into(),
+        ));
+    }
+    let u_axis = u_in_plane.normalize();
+    let v_axis = normal.cross(u_axis);
+    let backdrop_image = b.image.as_ref().map(|img| base.join(img));
+    let pattern = match (b.checker, &b.image) {
+        (Some(_), Some(_)) => {
+            return Err(bad(
+                "backdrop",
+                "give either checker or image, not both".into(),
+            ));
+        }
+        (None, None) => {
+            return Err(bad(
+                "backdrop",
+                "needs checker = <size> or image = <file>".into(),
+            ));
+        }
+        (Some(size), None) => {
+            if !(size.is_finite() && size > 0.0) {
+                return Err(bad(
+                    "backdrop.checker",
+                    format!("square size must be a finite number > 0, got {size}"),
+                ));
+            }
+            let colors = b.checker_colors.unwrap_or([[1.0; 3], [0.0; 3]]);
+            for c in &colors {
+                check_color(c).map_err(|m| bad("backdrop.checker_colors", m))?;
+            }
+            Pattern::Checker { size, colors }
+        }
+        (None, Some(img)) => {
+            let width = b.width.ok_or_else(|| {
+                bad(
+                    "backdrop.width",
+                    "an image backdrop needs width (world units)".into(),
+                )
+            })?;
+            if !(width.is_finite() && width > 0.0) {
+                return Err(bad(
+                    "backdrop.width",
+                    format!("must be a finite number > 0, got {width}"),
+                ));
+            }
+            let outside = b.outside.unwrap_or(f.image.background);
+            check_color(&outside).map_err(|m| bad("backdrop.outside", m))?;
+            let file = base.join(img);
+            Pattern::Image(
+                load_texture(&file, width, outside).map_err(|m| bad("backdrop.image", m))?,
+            )
+        }
+    };
+    let backdrop = Backdrop {
+        center,
+        normal,
+        u_axis,
+        v_axis,
+        pattern,
+    };
+
+    // [render]
+    let r = &f.render;
+    if !(r.step.is_finite() && (MIN_STEP..=16.0).contains(&r.step)) {
+        return Err(bad(
+            "render.step",
+            format!("must be from {MIN_STEP} to 16 voxels, got {}", r.step),
+        ));
+    }
+    if r.max_events == 0 || r.max_events > 100_000 {
+        return Err(bad(
+            "render.max_events",
+            format!("must be from 1 to 100000, got {}", r.max_events),
+        ));
+    }
+    if !(r.tolerance.is_finite() && r.tolerance >= 1e-12 && r.tolerance <= 0.1) {
+        return Err(bad(
+            "render.tolerance",
+            format!("must be from 1e-12 to 0.1 voxels, got {}", r.tolerance),
+        ));
+    }
+    if r.samples == 0 || r.samples > 64 {
+        return Err(bad(
+            "render.samples",
+            format!("must be from 1 to 64, got {}", r.samples),
+        ));
+    }
+    let tile = r
+        .tile
+        .unwrap_or_else(|| default_tile(r.supersampling.first_pass_rays(r.samples) as u32));
+    if tile == 0 || tile > 256 {
+        return Err(bad(
+            "render.tile",
+            format!("must be from 1 to 256 pixels, got {tile}"),
+        ));
+    }
+    if r.prss_samples == 0 || r.prss_samples > 64 {
+        return Err(bad(
+            "render.prss_samples",
+            format!("must be from 1 to 64, got {}", r.prss_samples),
+        ));
+    }
+    let classify = match r.classify.as_deref() {
+        // Precomputed tags are cheap (tens of ms, cached) and make the cell
+        // walk an order of magnitude faster than bounding every visited cell
+        // on the fly, so every cell traversal uses them unless told `none`.
+        None if r.traversal != Traversal::Step => Some(DEFAULT_CLASSIFY),
+        None | Some("none") => None,
+        Some(name) => match Method::parse(name) {
+            Some(m) if m.is_conservative() => Some(m),
+            _ => {
+                return Err(bad(
+                    "render.classify",
+                    format!(
+                        "unknown or non-conservative method '{name}' (none, bmcc, accc, accc2, accc4, accc8, bezier)"
+                    ),
+                ));
+            }
+        },
+    };
+    if matches!(r.traversal, Traversal::Octree | Traversal::Distance) && classify.is_none() {
+        return Err(bad(
+            "render.classify",
+            "the octree is built over classified cells: use bmcc, accc or bezier".into(),
+        ));
+    }
+    if r.traversal == Traversal::Step && classify.is_some() {
+        return Err(bad(
+            "render.classify",
+            "step traversal samples every point and uses no classification".into(),
+        ));
+    }
+    if !(r.prss_curvature.is_finite() && r.prss_curvature > 0.0) {
+        return Err(bad(
+            "render.prss_curvature",
+            format!("must be > 0 (checker squares), got {}", r.prss_curvature),
+        ));
+    }
+    if !r.leaf.is_power_of_two() || r.leaf > 64 {
+        return Err(bad(
+            "render.leaf",
+            format!("must be a power of two up to 64, got {}", r.leaf),
+        ));
+    }
+    let render = RenderSettings {
+        traversal: r.traversal,
+        step: r.step,
+        max_events: r.max_events,
+        tolerance: r.tolerance,
+        tile,
+        classify,
+        leaf: r.leaf,
+        supersampling: r.supersampling,
+        samples: r.samples,
+        prss_samples: r.prss_samples,
+        prss_map: r.prss_map,
+        prss_fallback: r.prss_fallback,
+        footprint: r.footprint,
+        prss_curvature: r.prss_curvature,
+        seed: r.seed,
+        coefficients: r.coefficients,
+        clear_crossing_cells: r.clear_crossing_cells,
+        skip_empty_approach: r.skip_empty_approach,
+        skip_clear_segments: r.skip_clear_segments,
+    };
+
+    let ignored = ignored_settings(written, &f, &surface, &render);
+    let scene = Scene {
+        ignored,
+        overrides: Vec::new(),
+        written: Vec::new(),
+        path: path.to_path_buf(),
+        width: w,
+        height: h,
+        background: f.image.background,
+        camera,
+        volume,
+        spacing: v.spacing,
+        surface,
+        backdrop,
+        backdrop_image,
+        render,
+    };
+    // One tile at a time, the least any render needs, so that whether a
+    // scene file is accepted does not depend on the machine's cores; a
+    // renderer checks again with its own thread count (`snell render` does
+    // once its pool is built).
+    scene.check_memory(crate::volume::limits::default_memory_limit(), 1)?;
+    Ok(scene)
+}
+
+fn check_color(c: &[f32; 3]) -> Result<(), String> {
+    if c.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(format!("colour {c:?} must be finite"))
+    }
+}
+
+/// Loads a photograph as an RGB texture in `[0, 1]`.
+fn load_texture(path: &Path, world_width: f64, outside: [f32; 3]) -> Result<Texture, String> {
+    let photo = crate::film::photo::read(path).map_err(|m| format!("{}: {m}", path.display()))?;
+    Ok(Texture {
+        width_px: photo.width as usize,
+        height_px: photo.height as usize,
+        pixels: photo.pixels,
+        world_width,
+        outside,
+    })
+}
