@@ -36,7 +36,7 @@ pub fn open(path: &Path) -> io::Result<File> {
     Ok(file)
 }
 
-/// Reads a whole input file as UTF-8 text (a scene, a list of points).
+/// Reads a whole input file as UTF-8 text (a scene).
 pub fn read_to_string(path: &Path) -> io::Result<String> {
     let mut text = String::new();
     io::Read::read_to_string(&mut open(path)?, &mut text)?;
