@@ -30,7 +30,7 @@ use flate2::read::ZlibDecoder;
 use flate2::write::ZlibEncoder;
 
 use super::raw::{
-    byte_range, data_byte_len, finish_volume, map_file, max_gunzipped_len, open_file, read_full,
+    byte_range, data_byte_len, finish_volume, map_file, max_gunzipped_len, read_full,
     write_samples, zeroed_buffer,
 };
 use super::{
@@ -73,7 +73,7 @@ const KNOWN_IGNORED: [&str; 23] = [
 /// Reads a `.mha` (data after the header) or `.mhd` (data file named by
 /// the header) file.
 pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
-    let file = open_file(path).map_err(|e| VolumeError::io(path, e))?;
+    let file = crate::input::open(path).map_err(|e| VolumeError::io(path, e))?;
     let map = map_file(path, &file)?;
     let (header, header_len) = parse_header(path, &map)?;
     let layout = Layout::from_header(path, &header)?;
@@ -101,7 +101,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             samples_in(path, file, &layout, need, count, opts, &what)?
         }
         Some(data_path) => {
-            let data = open_file(data_path).map_err(|e| {
+            let data = crate::input::open(data_path).map_err(|e| {
                 VolumeError::format(
                     path,
                     format!("ElementDataFile {}: {e}", data_path.display()),

@@ -13,8 +13,8 @@ use std::path::Path;
 use flate2::read::MultiGzDecoder;
 
 use super::raw::{
-    byte_range, data_byte_len, finish_volume, gzip_error, map_file, max_gunzipped_len, open_file,
-    read_full, skip_bytes, zeroed_buffer,
+    byte_range, data_byte_len, finish_volume, gzip_error, map_file, max_gunzipped_len, read_full,
+    skip_bytes, zeroed_buffer,
 };
 use super::{
     Endian, LoadOptions, SampleType, Volume, VolumeError, checked_sample_count, decode_samples,
@@ -41,7 +41,7 @@ struct Header {
 
 /// Reads a `.nii` or `.nii.gz` file.
 pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
-    let mut file = open_file(path).map_err(|e| VolumeError::io(path, e))?;
+    let mut file = crate::input::open(path).map_err(|e| VolumeError::io(path, e))?;
     let mut magic = [0u8; 2];
     let got = read_full(&mut file, &mut magic).map_err(|e| VolumeError::io(path, e))?;
     file.seek(SeekFrom::Start(0))

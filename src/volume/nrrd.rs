@@ -27,8 +27,8 @@ use flate2::Compression;
 use flate2::write::GzEncoder;
 
 use super::raw::{
-    byte_range, data_byte_len, finish_volume, gzip_error, map_file, max_gunzipped_len, open_file,
-    read_full, skip_bytes, write_samples, zeroed_buffer,
+    byte_range, data_byte_len, finish_volume, gzip_error, map_file, max_gunzipped_len, read_full,
+    skip_bytes, write_samples, zeroed_buffer,
 };
 use super::{
     Endian, LoadOptions, SampleType, Volume, VolumeError, checked_sample_count, decode_samples,
@@ -66,7 +66,7 @@ impl Encoding {
 
 /// Reads a `.nrrd` (attached data) or `.nhdr` (detached data) file.
 pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
-    let file = open_file(path).map_err(|e| VolumeError::io(path, e))?;
+    let file = crate::input::open(path).map_err(|e| VolumeError::io(path, e))?;
     let mut reader = BufReader::new(file);
     let (fields, header_len) = parse_header(path, &mut reader)?;
     let layout = Layout::from_fields(path, &fields)?;
@@ -100,7 +100,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     };
 
     let open = |data_path: &Path| {
-        open_file(data_path)
+        crate::input::open(data_path)
             .map(BufReader::new)
             .map_err(|e| data_file_error(path, data_path, e))
     };

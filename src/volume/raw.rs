@@ -39,7 +39,7 @@ pub fn read(path: &Path, spec: &RawSpec, opts: &LoadOptions) -> Result<Volume, V
         )
     })?;
 
-    let file = open_file(path).map_err(|e| VolumeError::io(path, e))?;
+    let file = crate::input::open(path).map_err(|e| VolumeError::io(path, e))?;
     let len = file.metadata().map_err(|e| VolumeError::io(path, e))?.len();
     let [nx, ny, nz] = spec.dims;
     if len < end {
@@ -164,12 +164,6 @@ impl Deref for FileBytes {
             FileBytes::Mapped(map) => map,
         }
     }
-}
-
-/// Opens a file samples are read from; see [`crate::input::open`] for
-/// why only regular files are.
-pub(super) fn open_file(path: &Path) -> io::Result<File> {
-    crate::input::open(path)
 }
 
 /// Maps `file` read-only so samples decode straight from the page cache.
@@ -327,6 +321,7 @@ pub(super) fn encode_sample(ty: SampleType, v: f32, out: &mut Vec<u8>) {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::volume::Endian;
 
     #[test]
     fn encode_clamps_and_rounds() {
@@ -337,7 +332,6 @@ mod tests {
         encode_sample(SampleType::U16, f32::NAN, &mut out);
         assert_eq!(out, vec![255, 0, 3, 0, 0]);
     }
-    use crate::volume::Endian;
 
     #[test]
     fn implied_dims_prefers_z_and_skips_non_multiples() {
