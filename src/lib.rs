@@ -5,12 +5,17 @@
 //! [`filter`] (prefilter, continuous field) → [`classify`] and [`lattice`]
 //! (which cells can hold the surface) → [`render`] (rays as SoA packets per
 //! tile through staged queues: generate, entry, traverse, solve, refract,
-//! record) → [`film`] (hit positions and colours). [`reference`] and
-//! [`compare`] measure accuracy against exact ground truth.
+//! record) → [`film`] (hit positions and colours).
+//! [`reference`](mod@reference) and [`compare`] measure accuracy against
+//! exact ground truth.
 
 // Hot loops index several structure-of-arrays columns by the same lane index;
 // an iterator over one of them would hide that symmetry.
 #![allow(clippy::needless_range_loop)]
+// These docs are read with the private items (`cargo doc
+// --document-private-items`, as CI builds them, warnings denied): the stages'
+// internals are the point, so public items link into them.
+#![allow(rustdoc::private_intra_doc_links)]
 
 pub mod atomic;
 pub mod bench;

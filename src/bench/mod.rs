@@ -1,7 +1,7 @@
 //! Benchmarks as a product feature: run time against error, per configuration.
 //!
 //! A [`Suite`] is a list of tables of experiments (a scene file plus `--set`
-//! overrides). [`bench`] renders each distinct configuration once to warm up
+//! overrides). [`bench`](fn@bench) renders each distinct configuration once to warm up
 //! and then `repeats` times, reports the median wall time with the per-stage
 //! profile, work counters and peak memory of the median run, measures the hit
 //! error against ground truth (the analytic spheres for sphere phantoms, a

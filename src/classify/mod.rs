@@ -342,7 +342,7 @@ pub fn accc_sub<T: Coefficient>(
     accc_sub_with_masks(field, lattice, iso, coarse, n, false).0
 }
 
-/// [`accc_sub`] and, with `keep_masks`, every kept cell's 4³ sub-cell mask
+/// [`accc_sub`](fn@accc_sub) and, with `keep_masks`, every kept cell's 4³ sub-cell mask
 /// ([`accc_sub::SubCellBounds::cell_mask`]) by linear cell index,
 /// ascending.
 pub fn accc_sub_with_masks<T: Coefficient>(

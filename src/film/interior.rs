@@ -6,8 +6,8 @@
 //! [`Interior::OneSquare`] when the bicubic map over it provably stays in the
 //! centre's checker square: the box of the bilinear map at the pixel's
 //! corners, edge midpoints and centre, widened by how far the bicubic map
-//! strays from it (`prss::bicubic_in_one_square` derives the bound). The
-//! same test per coordinate tells a pixel that crosses only one grid line
+//! strays from it (`prss::one_square::bicubic_in_one_square` derives the
+//! bound). The same test per coordinate tells a pixel that crosses only one grid line
 //! of the checkerboard ([`Interior::StraddlesU`], [`Interior::StraddlesV`]),
 //! whose sub-points' parities need only the other coordinate.
 //!

@@ -5,7 +5,7 @@
 //! the gradient), then sweeps the `S³` neighbourhood row by row: each row is a
 //! contiguous run of `S` coefficients thanks to the apron, so the inner loop is
 //! branch-free. The support is a const generic, chosen once per call by
-//! [`with_support!`], so every loop has a compile-time trip count.
+//! `with_support!`, so every loop has a compile-time trip count.
 
 use glam::DVec3;
 

@@ -129,7 +129,7 @@ pub struct PovOptions {
     /// Use this `max_gradient` instead of the one computed from the data.
     pub max_gradient: Option<f64>,
     /// Factor on the computed gradient bound (default:
-    /// [`gradient_safety`](super::df3::gradient_safety)).
+    /// [`super::df3::gradient_safety`]).
     pub gradient_safety: Option<f64>,
 }
 

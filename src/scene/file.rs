@@ -1,6 +1,6 @@
 //! The scene file's format, as serde sees it: one struct per TOML
 //! section, unknown keys refused, defaults for what may be left out.
-//! [`super::resolve`] turns it into a validated [`super::Scene`].
+//! [`resolve`](fn@super::resolve) turns it into a validated [`super::Scene`].
 
 use serde::Deserialize;
 
@@ -77,7 +77,8 @@ fn default_endian() -> String {
 #[serde(deny_unknown_fields)]
 pub(super) struct VolumeCfg {
     pub(super) path: Option<String>,
-    /// Read as a [`PhantomSpec`] by [`phantom_spec`], whose errors name the
+    /// Read as a [`PhantomSpec`](crate::phantom::PhantomSpec) by
+    /// [`phantom_spec`](super::resolve::phantom_spec), whose errors name the
     /// key inside the table (serde's tagged enums lose the path).
     pub(super) phantom: Option<toml::Value>,
     pub(super) raw: Option<RawCfg>,
@@ -138,7 +139,7 @@ pub(super) struct RenderCfg {
     #[serde(default)]
     pub(super) tile: Option<u32>,
     /// `none`, `bmcc`, `accc`, `accc2`, `accc4`, `accc8`, `bezier` (see `classify`);
-    /// unset means [`DEFAULT_CLASSIFY`] for cell traversals.
+    /// unset means [`DEFAULT_CLASSIFY`](super::DEFAULT_CLASSIFY) for cell traversals.
     #[serde(default)]
     pub(super) classify: Option<String>,
     /// Octree leaf side in cells (a power of two).

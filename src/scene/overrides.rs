@@ -102,7 +102,7 @@ pub(super) fn blame_override(
 }
 
 /// Every key of `t` as a dotted path with its value as written (TOML;
-/// [`Scene::parse`] replaces it by `--set key=value` for an override).
+/// [`Scene::parse`](super::Scene::parse) replaces it by `--set key=value` for an override).
 pub(super) fn written_keys(t: &toml::Table, prefix: &str, out: &mut Vec<(String, String)>) {
     for (k, v) in t {
         let key = format!("{prefix}{k}");

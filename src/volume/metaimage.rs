@@ -166,7 +166,7 @@ pub fn write(path: &Path, vol: &Volume, compressed: bool) -> Result<(), VolumeEr
 /// Digits of the `CompressedDataSize` slot: any `u64`.
 const SIZE_DIGITS: usize = 20;
 
-/// The header [`write`] writes, split where the compressed size goes (the
+/// The header [`write`](fn@write) writes, split where the compressed size goes (the
 /// second part empty of it when not compressed).
 fn header_text(vol: &Volume, compressed: bool) -> (String, String) {
     let [nx, ny, nz] = vol.dims();
@@ -564,7 +564,7 @@ impl Layout {
     }
 }
 
-/// MetaIO's names of the sample types, as [`write`] writes them.
+/// MetaIO's names of the sample types, as [`write`](fn@write) writes them.
 const TYPE_NAMES: [(SampleType, &str); 8] = [
     (SampleType::I8, "MET_CHAR"),
     (SampleType::U8, "MET_UCHAR"),

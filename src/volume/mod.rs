@@ -595,7 +595,7 @@ pub fn write(path: &Path, vol: &Volume, compressed: bool) -> Result<(), VolumeEr
     }
 }
 
-/// The formats [`write`] writes, by extension.
+/// The formats [`write`](fn@write) writes, by extension.
 pub const WRITTEN_FORMATS: [&str; 2] = ["nrrd", "mha"];
 
 /// The volume formats [`load`] knows by their file names (anything else

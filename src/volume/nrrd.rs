@@ -44,7 +44,7 @@ const MAX_DIMENSION: usize = 16;
 /// Header versions this reader understands (`NRRD0001` .. `NRRD0005`).
 const MAX_VERSION: u32 = 5;
 
-/// How [`write`] encodes the samples.
+/// How [`write`](fn@write) encodes the samples.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Encoding {
     Raw,

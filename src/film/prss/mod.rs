@@ -43,17 +43,32 @@
 //! - `trace`: every pixel with a missing neighbour, or whose map bends faster
 //!   than [`PostSettings::curvature`], is flagged for real sub-pixel rays
 //!   (adaptive supersampling, traced by the renderer).
+//!
+//! Here: the settings, the per-pixel paths and the banded pass over the
+//! film. Beside it: [`edge`] locates the straight boundary `blend` splits a
+//! pixel by, [`one_square`] proves a pixel's map stays in one checker square
+//! (its sub-points then need no work), and [`checker`] averages the
+//! checkerboard over the sub-points.
 
 use rayon::prelude::*;
 use serde::Serialize;
 
-use crate::filter::kernel::floor_fast;
 use crate::scene::{Backdrop, FootprintFilter, Pattern, PrssFallback, PrssMap, RenderSettings};
 
 use super::Film;
 use super::footprint;
-use super::hitmap::{HitMap, Jacobian, NO_HIT, Neighbour};
+use super::hitmap::{HitMap, Jacobian, Neighbour};
 use super::interior::{Interior, classify_rows};
+
+mod checker;
+mod edge;
+mod one_square;
+
+use checker::{U, V, checker_average, checker_average_on, checker_parities};
+use edge::{EdgeLine, edge_line};
+#[cfg(test)]
+pub(super) use one_square::footprint_box;
+use one_square::{box_in_one_square, in_one_square};
 
 /// Rows shaded per parallel task ([`shade`]).
 const BAND_ROWS: usize = 16;
@@ -313,7 +328,8 @@ type Grid = [[[f64; 2]; 5]; 5];
 
 /// `Σ_j wy[j] Σ_i wx[i] g[j][i]`, split: combine rows once per sub-point row.
 /// Every term is added, zero weights too, in order of `j`: the vectorised
-/// [`odd_count_chunked`] sums the same way, so the two agree bit for bit.
+/// `odd_count_chunked` ([`checker`]) sums the same way, so the two agree bit
+/// for bit.
 fn rows(g: &Grid, wy: &[f64; 5]) -> [[f64; 2]; 5] {
     let mut r = [[0.0; 2]; 5];
     for (j, row) in g.iter().enumerate() {
@@ -451,7 +467,7 @@ impl Look {
 
     /// A moved surface over a checkerboard with at most 8 sub-points per
     /// axis (offsets `t`), as its table of parities — each the colour
-    /// [`Look::color`] of `Moved` gives, bit for bit (the same points,
+    /// `Look::color` (the tests' definition) of `Moved` gives, bit for bit (the same points,
     /// divisions and floors, a row of sub-points per vector; tested) —
     /// so the sub-point loop reads a bit instead of dividing and flooring.
     fn tabulated(self, t: &[f64], backdrop: &Backdrop) -> Look {
@@ -536,246 +552,6 @@ pub(crate) struct Ctx<'a> {
 
 fn blends(f: PrssFallback) -> bool {
     matches!(f, PrssFallback::Blend | PrssFallback::BlendTrace)
-}
-
-/// Standard deviation (pixels) of the Gaussian that blurs the piece
-/// indicator to locate a boundary, and the window radius. A sampled straight
-/// edge is a staircase; the blur averages its steps, the more so the wider it
-/// is, at the price of bending boundaries and nearby features. Measured on
-/// the sphere, ball, teapot and photo scenes at 256×256, σ from 0.8 to 1.5
-/// changes PSNR by at most 0.4 dB (photo), best at 1.0–1.2.
-const EDGE_SIGMA: f64 = 1.2;
-const EDGE_RADIUS: i64 = 4;
-const EDGE_SIDE: usize = 2 * EDGE_RADIUS as usize + 1;
-
-/// A boundary of the pixel's piece, as a line: sub-point `t` (offset from
-/// the centre, pixels) is on the pixel's own side when `d + n·t ≥ 0`.
-#[derive(Clone, Copy, Debug)]
-struct EdgeLine {
-    d: f64,
-    n: [f64; 2],
-}
-
-/// `Φ⁻¹(p)` for `p ∈ (0, 1)`: Newton's method on [`footprint::phi_cdf`]
-/// (monotone on either side of the root) from Acklam's rational
-/// approximation of the quantile (its author gives a relative error below
-/// 1.15e-9), each step an `erfc` and an `exp`. Over `p` in the fit's range
-/// `[1e-4, 1 − 1e-4]` that takes 2 steps, the last one confirming; from 0
-/// it took 5.2 on average and up to 13.
-fn inverse_phi(p: f64) -> f64 {
-    let mut x = quantile_guess(p);
-    for _ in 0..60 {
-        let f = footprint::phi_cdf(x) - p;
-        let dens = (-0.5 * x * x).exp() / (2.0 * std::f64::consts::PI).sqrt();
-        let dx = f / dens;
-        x -= dx;
-        if dx.abs() < 1e-10 {
-            break;
-        }
-    }
-    x
-}
-
-/// Acklam's approximation of the standard normal quantile, `p ∈ (0, 1)`
-/// (0 outside, or for NaN: Newton's start before). The test
-/// `inverse_phi_inverts_the_cdf` checks it within 1e-6 of the converged
-/// quantile.
-fn quantile_guess(p: f64) -> f64 {
-    const A: [f64; 6] = [
-        -3.969_683_028_665_376e1,
-        2.209_460_984_245_205e2,
-        -2.759_285_104_469_687e2,
-        1.383_577_518_672_69e2,
-        -3.066_479_806_614_716e1,
-        2.506_628_277_459_239,
-    ];
-    const B: [f64; 5] = [
-        -5.447_609_879_822_406e1,
-        1.615_858_368_580_409e2,
-        -1.556_989_798_598_866e2,
-        6.680_131_188_771_972e1,
-        -1.328_068_155_288_572e1,
-    ];
-    const C: [f64; 6] = [
-        -7.784_894_002_430_293e-3,
-        -3.223_964_580_411_365e-1,
-        -2.400_758_277_161_838,
-        -2.549_732_539_343_734,
-        4.374_664_141_464_968,
-        2.938_163_982_698_783,
-    ];
-    const D: [f64; 4] = [
-        7.784_695_709_041_462e-3,
-        3.224_671_290_700_398e-1,
-        2.445_134_137_142_996,
-        3.754_408_661_907_416,
-    ];
-    const LOW: f64 = 0.024_25;
-    let tail = |q: f64| {
-        (((((C[0] * q + C[1]) * q + C[2]) * q + C[3]) * q + C[4]) * q + C[5])
-            / ((((D[0] * q + D[1]) * q + D[2]) * q + D[3]) * q + 1.0)
-    };
-    if !(p > 0.0 && p < 1.0) {
-        0.0
-    } else if p < LOW {
-        tail((-2.0 * p.ln()).sqrt())
-    } else if p > 1.0 - LOW {
-        -tail((-2.0 * (1.0 - p).ln()).sqrt())
-    } else {
-        let q = p - 0.5;
-        let r = q * q;
-        (((((A[0] * r + A[1]) * r + A[2]) * r + A[3]) * r + A[4]) * r + A[5]) * q
-            / (((((B[0] * r + B[1]) * r + B[2]) * r + B[3]) * r + B[4]) * r + 1.0)
-    }
-}
-
-/// [`edge_line`]'s window: per pixel the Gaussian weight and its gradient
-/// weights, and their sums over the whole window.
-struct EdgeWeights {
-    w: [[f64; 3]; EDGE_SIDE * EDGE_SIDE],
-    full_den: f64,
-    full_dden: [f64; 2],
-}
-
-/// [`EdgeWeights`] for [`EDGE_SIGMA`], computed once (81 `exp` per
-/// boundary pixel cost 6% of the stage on the teapot; the 162 divisions for
-/// the gradient weights 2% more).
-fn edge_weights() -> &'static EdgeWeights {
-    static WEIGHTS: std::sync::OnceLock<EdgeWeights> = std::sync::OnceLock::new();
-    WEIGHTS.get_or_init(|| {
-        let s2 = EDGE_SIGMA * EDGE_SIGMA;
-        let w: [[f64; 3]; EDGE_SIDE * EDGE_SIDE] = std::array::from_fn(|k| {
-            let i = (k % EDGE_SIDE) as i64 - EDGE_RADIUS;
-            let j = (k / EDGE_SIDE) as i64 - EDGE_RADIUS;
-            let w = (-((i * i + j * j) as f64) / (2.0 * s2)).exp();
-            [w, i as f64 / s2 * w, j as f64 / s2 * w]
-        });
-        // The sums over a window inside the image, in the loops' order.
-        let (mut den, mut dden) = (0.0, [0.0; 2]);
-        for [w, gx, gy] in w {
-            den += w;
-            dden[0] += gx;
-            dden[1] += gy;
-        }
-        EdgeWeights {
-            w,
-            full_den: den,
-            full_dden: dden,
-        }
-    })
-}
-
-/// [`edge_line`]'s sums over the window: the weights of the pixels on the
-/// centre's piece, of all pixels in the image, and the same for the
-/// gradient weights.
-#[derive(Clone, Copy, Debug, PartialEq)]
-struct WindowSums {
-    num: f64,
-    den: f64,
-    dnum: [f64; 2],
-    dden: [f64; 2],
-}
-
-/// [`WindowSums`] of the window around `(x, y)`, wherever it lies.
-fn window_sums(map: &HitMap, ew: &EdgeWeights, x: i64, y: i64, centre: Option<f32>) -> WindowSums {
-    let r = EDGE_RADIUS;
-    let mut s = WindowSums {
-        num: 0.0,
-        den: 0.0,
-        dnum: [0.0; 2],
-        dden: [0.0; 2],
-    };
-    for j in -r..=r {
-        for i in -r..=r {
-            if !map.inside(x + i, y + j) {
-                continue;
-            }
-            let [w, gx, gy] = ew.w[((j + r) * EDGE_SIDE as i64 + i + r) as usize];
-            let same = map.same_piece(x + i, y + j, centre);
-            s.den += w;
-            s.dden[0] += gx;
-            s.dden[1] += gy;
-            if same {
-                s.num += w;
-                s.dnum[0] += gx;
-                s.dnum[1] += gy;
-            }
-        }
-    }
-    s
-}
-
-/// [`window_sums`] of a window inside the image, the same bits: the weights
-/// of all pixels sum to the precomputed totals (added in the same order),
-/// and the pieces are compared row by row through [`HitMap::keys`].
-fn window_sums_inside(
-    map: &HitMap,
-    ew: &EdgeWeights,
-    x: i64,
-    y: i64,
-    centre: Option<f32>,
-) -> WindowSums {
-    let r = EDGE_RADIUS;
-    let key = centre.unwrap_or(NO_HIT);
-    let (mut num, mut dnum) = (0.0, [0.0; 2]);
-    for (j, row) in ew.w.chunks_exact(EDGE_SIDE).enumerate() {
-        let at = ((y - r + j as i64) * map.w + x - r) as usize;
-        // Without branches (across a boundary they go either way; teapot,
-        // the edge lines 14–15 → 10–12 M cycles a frame): a pixel off the
-        // piece adds an exact zero, so the sums keep their bits.
-        for (&k, &[w, gx, gy]) in map.keys()[at..at + EDGE_SIDE].iter().zip(row) {
-            let on = if k == key { 1.0 } else { 0.0 };
-            num += on * w;
-            dnum[0] += on * gx;
-            dnum[1] += on * gy;
-        }
-    }
-    WindowSums {
-        num,
-        den: ew.full_den,
-        dnum,
-        dden: ew.full_dden,
-    }
-}
-
-/// Locates the boundary of the pixel's piece near `(x, y)` from the piece
-/// indicator of its 9×9 neighbourhood: blurred by a Gaussian, a straight
-/// boundary at signed distance `d` reads `Φ(d/σ)` at the centre with gradient
-/// `φ(d/σ)/σ` along its normal. `None` when the indicator does not look like
-/// one straight boundary (corners, thin features, several pieces), judged by
-/// that gradient.
-fn edge_line(map: &HitMap, x: i64, y: i64, centre: Option<f32>) -> Option<EdgeLine> {
-    let ew = edge_weights();
-    let r = EDGE_RADIUS;
-    let WindowSums {
-        num,
-        den,
-        dnum,
-        dden,
-    } = if x >= r && y >= r && x + r < map.w && y + r < map.h {
-        window_sums_inside(map, ew, x, y, centre)
-    } else {
-        window_sums(map, ew, x, y, centre)
-    };
-    let ind = num / den;
-    if !(1e-4..=1.0 - 1e-4).contains(&ind) {
-        return None;
-    }
-    let g = [
-        (dnum[0] - ind * dden[0]) / den,
-        (dnum[1] - ind * dden[1]) / den,
-    ];
-    let glen = (g[0] * g[0] + g[1] * g[1]).sqrt();
-    let q = inverse_phi(ind);
-    let expect = (-0.5 * q * q).exp() / ((2.0 * std::f64::consts::PI).sqrt() * EDGE_SIGMA);
-    let ratio = glen / expect;
-    if !(0.75..=1.33).contains(&ratio) {
-        return None;
-    }
-    Some(EdgeLine {
-        d: EDGE_SIGMA * q,
-        n: [g[0] / glen, g[1] / glen],
-    })
 }
 
 impl Ctx<'_> {
@@ -1208,246 +984,6 @@ fn grid(
     Some(g)
 }
 
-/// True when the map over the whole pixel provably stays inside the checker
-/// square of the centre: then every sub-point has the centre's colour.
-fn in_one_square(g: &Grid, map: PrssMap, size: f64) -> bool {
-    // The map at t ∈ {-1/2, 0, 1/2}²: the quadrants' corners, whose hull holds
-    // each bilinear quadrant; for the biquadratic, converted to the Bernstein
-    // control points on the pixel, whose hull holds the patch.
-    let w = [-0.5, 0.0, 0.5].map(|t| map_weights(map, t));
-    let mut e = [[[0.0; 2]; 3]; 3];
-    for (j, wy) in w.iter().enumerate() {
-        let r = rows(g, wy);
-        for (i, wx) in w.iter().enumerate() {
-            e[j][i] = cols(&r, wx);
-        }
-    }
-    match map {
-        PrssMap::Bilinear => {}
-        PrssMap::Biquadratic => {
-            let mid = |l: [f64; 2], m: [f64; 2], r: [f64; 2]| {
-                [
-                    2.0 * m[0] - 0.5 * (l[0] + r[0]),
-                    2.0 * m[1] - 0.5 * (l[1] + r[1]),
-                ]
-            };
-            for row in e.iter_mut() {
-                row[1] = mid(row[0], row[1], row[2]);
-            }
-            for i in 0..3 {
-                e[1][i] = mid(e[0][i], e[1][i], e[2][i]);
-            }
-        }
-        PrssMap::Bicubic => return bicubic_in_one_square(g, size),
-    }
-    // The box of the nine points, widened for the rounding of the points
-    // and of the sub-points evaluated in it, as the bicubic test is.
-    // A NaN hit makes every point NaN (each is a sum over all 25 taps,
-    // zero weights included): the box stays empty (infinite bounds), which
-    // `box_in_one_square`'s range test refuses, as it does infinite hits.
-    let inv = 1.0 / size;
-    (0..2).all(|k| {
-        let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
-        for h in e.iter().flatten() {
-            lo = lo.min(h[k]);
-            hi = hi.max(h[k]);
-        }
-        let big = lo.abs().max(hi.abs());
-        box_in_one_square(lo, hi, 1e-9 * (big + size), inv)
-    })
-}
-
-/// [`in_one_square`] for the bicubic map, from the pixel's own footprint.
-///
-/// Per axis, Catmull-Rom between `p1` and `p2` is the straight line minus a
-/// blend of the two second differences: `CR(a) = (1-a)p1 + a·p2 −
-/// a(1−a)/2·[(1−a)(p0 − 2p1 + p2) + a(p1 − 2p2 + p3)]`, so over a half
-/// pixel (`a ≤ 1/2`) it strays from the line by at most `1/8` of the larger
-/// `|second difference|`. On a quadrant the map is the rows' Catmull-Rom in
-/// `x` combined by Catmull-Rom in `y` (absolute weights summing to at most
-/// `5/4`), which is the bilinear map of the quadrant's 2×2 hits, off by at
-/// most `(1/8)·max|Δy²| + (5/32)·max|Δx²|` (or the same with the axes
-/// swapped; the smaller is taken). The bilinear map stays inside the hull of
-/// its values at the quadrant's corners, so the whole pixel stays inside the
-/// box of the bilinear map at `t ∈ {−½, 0, ½}²` widened by that margin —
-/// about the pixel's footprint on a smooth map, where the 4×4-block bound
-/// this replaced was several footprints wide (sphere scene: 139k of 262k
-/// pixels reached [`checker_average`] with it).
-///
-/// The box holds the centre hit, so when it lies in one square every
-/// sub-point has the centre's colour and [`checker_average`] would return it
-/// exactly: the answer changes no colour, only the work. A non-finite grid
-/// (or one whose sum overflows) and values beyond the exact range of the
-/// floors are never claimed.
-fn bicubic_in_one_square(g: &Grid, size: f64) -> bool {
-    let inv = 1.0 / size;
-    // Both axes at once (see [`Lanes2`]); each lane's sum in the order of
-    // `Iterator::sum` (from −0).
-    let mut sum = [-0.0f64; 2];
-    for p in g.iter().flatten() {
-        sum = [sum[0] + p[0], sum[1] + p[1]];
-    }
-    if !(sum[0].is_finite() && sum[1].is_finite()) {
-        return false;
-    }
-    let (lo, hi, bend, big) = footprint_box(|j, i| Lanes2(g[j][i]));
-    // Widened a little more for the rounding of the sums.
-    (0..2).all(|k| box_in_one_square(lo.0[k], hi.0[k], bend.0[k] + 1e-9 * (big.0[k] + size), inv))
-}
-
-/// Whether `[lo − m, hi + m]` (backdrop units; `inv` is one over the square
-/// size) lies inside one checker square, within the exact range of the
-/// floors (NaN fails the range test).
-fn box_in_one_square(lo: f64, hi: f64, m: f64, inv: f64) -> bool {
-    let (a, b) = ((lo - m) * inv, (hi + m) * inv);
-    a.abs() < 4.0e15 && b.abs() < 4.0e15 && floor_fast(a) == floor_fast(b)
-}
-
-/// The arithmetic [`footprint_box`] needs: the `f64` test and the `f32` row
-/// pass compute the same bound.
-pub(super) trait Real:
-    Copy + std::ops::Add<Output = Self> + std::ops::Sub<Output = Self> + std::ops::Mul<Output = Self>
-{
-    /// `v`, exactly (the constants used are dyadic).
-    fn of(v: f32) -> Self;
-    fn abs(self) -> Self;
-    /// `max`/`min` as a compare and select, `self` kept unless `other`
-    /// beats it (NaN-blind: callers rule NaN out).
-    fn max(self, other: Self) -> Self;
-    fn min(self, other: Self) -> Self;
-}
-
-/// [`Real`] for the float types: `max`/`min` as a compare and select.
-macro_rules! real_float {
-    ($($t:ty),*) => {$(
-        impl Real for $t {
-            #[inline(always)]
-            fn of(v: f32) -> $t {
-                <$t>::from(v)
-            }
-            #[inline(always)]
-            fn abs(self) -> $t {
-                <$t>::abs(self)
-            }
-            #[inline(always)]
-            fn max(self, other: $t) -> $t {
-                if self > other { self } else { other }
-            }
-            #[inline(always)]
-            fn min(self, other: $t) -> $t {
-                if self < other { self } else { other }
-            }
-        }
-    )*};
-}
-
-real_float!(f64, f32);
-
-/// Both coordinates of a hit as one [`Real`], lane by lane:
-/// [`bicubic_in_one_square`] runs the two axes' chains of sums and compares
-/// side by side, each lane doing what `f64` does alone. One axis after the
-/// other the test was bound by those chains' latency (timed inside the PRSS
-/// stage on the teapot: about 530 cycles a pixel).
-#[derive(Clone, Copy)]
-struct Lanes2([f64; 2]);
-
-impl std::ops::Add for Lanes2 {
-    type Output = Lanes2;
-    #[inline(always)]
-    fn add(self, o: Lanes2) -> Lanes2 {
-        Lanes2([self.0[0] + o.0[0], self.0[1] + o.0[1]])
-    }
-}
-
-impl std::ops::Sub for Lanes2 {
-    type Output = Lanes2;
-    #[inline(always)]
-    fn sub(self, o: Lanes2) -> Lanes2 {
-        Lanes2([self.0[0] - o.0[0], self.0[1] - o.0[1]])
-    }
-}
-
-impl std::ops::Mul for Lanes2 {
-    type Output = Lanes2;
-    #[inline(always)]
-    fn mul(self, o: Lanes2) -> Lanes2 {
-        Lanes2([self.0[0] * o.0[0], self.0[1] * o.0[1]])
-    }
-}
-
-impl Real for Lanes2 {
-    #[inline(always)]
-    fn of(v: f32) -> Lanes2 {
-        Lanes2([v as f64; 2])
-    }
-    #[inline(always)]
-    fn abs(self) -> Lanes2 {
-        Lanes2(self.0.map(f64::abs))
-    }
-    #[inline(always)]
-    fn max(self, o: Lanes2) -> Lanes2 {
-        Lanes2(std::array::from_fn(|k| {
-            <f64 as Real>::max(self.0[k], o.0[k])
-        }))
-    }
-    #[inline(always)]
-    fn min(self, o: Lanes2) -> Lanes2 {
-        Lanes2(std::array::from_fn(|k| {
-            <f64 as Real>::min(self.0[k], o.0[k])
-        }))
-    }
-}
-
-/// One coordinate of the bicubic map over a pixel, from its 5×5 grid
-/// `at(j, i)` (see [`bicubic_in_one_square`] for why): `(lo, hi)`, the box of
-/// the bilinear map at the pixel's corners, edge midpoints and centre; `bend`,
-/// how far the bicubic map strays from it; and the grid's largest `|value|`,
-/// to scale the rounding slack by.
-#[inline(always)]
-pub(super) fn footprint_box<R: Real>(at: impl Fn(usize, usize) -> R) -> (R, R, R, R) {
-    let zero = R::of(0.0);
-    let mut big = zero;
-    for j in 0..5 {
-        for i in 0..5 {
-            big = big.max(at(j, i).abs());
-        }
-    }
-    // Largest |second difference| across x (dx) and down y (dy), at the 3×3
-    // centres of all five rows or columns (`…5`) or of the middle three
-    // (`…3`).
-    let two = R::of(2.0);
-    let (mut dx5, mut dx3, mut dy5, mut dy3) = (zero, zero, zero, zero);
-    for a in 0..5 {
-        for b in 1..4 {
-            let ddx = (at(a, b - 1) - two * at(a, b) + at(a, b + 1)).abs();
-            let ddy = (at(b - 1, a) - two * at(b, a) + at(b + 1, a)).abs();
-            dx5 = dx5.max(ddx);
-            dy5 = dy5.max(ddy);
-            if (1..4).contains(&a) {
-                dx3 = dx3.max(ddx);
-                dy3 = dy3.max(ddy);
-            }
-        }
-    }
-    let (eighth, five_32) = (R::of(0.125), R::of(5.0 / 32.0));
-    let bend = (dy3 * eighth + dx5 * five_32).min(dx3 * eighth + dy5 * five_32);
-    let (half, quarter) = (R::of(0.5), R::of(0.25));
-    let c = at(2, 2);
-    let (mut lo, mut hi) = (c, c);
-    for (sy, sx) in [(1, 1), (1, 3), (3, 1), (3, 3)] {
-        let (ex, ey) = (at(2, sx), at(sy, 2));
-        for p in [
-            half * (c + ex),
-            half * (c + ey),
-            quarter * ((c + ex) + (ey + at(sy, sx))),
-        ] {
-            lo = lo.min(p);
-            hi = hi.max(p);
-        }
-    }
-    (lo, hi, bend, big)
-}
-
 /// The larger side of the bounding box of the map at the pixel's centre,
 /// edge midpoints and corners (backdrop units): the footprint's extent.
 fn map_extent(g: &Grid, map: PrssMap) -> f64 {
@@ -1599,179 +1135,6 @@ fn one_square_colours(
             *o = colors[((odd >> l) & 1) as usize];
         }
     })
-}
-
-/// The average of a checkerboard over the sub-points `taps` of the map `g`:
-/// the map is scaled to square units once, so each sub-point costs two
-/// floors and a parity instead of two divisions and a colour lookup, and
-/// only the odd squares are counted (two colours: the mean is a mix).
-///
-/// With SIMD (AVX2 or AVX-512) a row's sub-points go [`CHUNK`] at a time:
-/// the columns combine as vectors, the floors are rounding instructions and
-/// each coordinate's parity is `f - 2⌊f/2⌋` in floats — the same count as the
-/// integer parity for every input (tested, NaN and huge values included).
-fn checker_average(g: &Grid, taps: &Taps, size: f64, colors: &[[f32; 3]; 2]) -> [f32; 3] {
-    checker_average_on::<BOTH>(g, taps, size, colors)
-}
-
-/// Which coordinates of the map [`odd_count`] computes: the others are
-/// taken as 0, an even floor, and the caller accounts for their parity.
-const U: u8 = 1;
-const V: u8 = 2;
-const BOTH: u8 = U | V;
-
-/// [`checker_average`] computing only the coordinates in `AXES`. With one
-/// (`U`: only `u` may cross into another square; `V`: only `v`), the map
-/// must provably stay in the centre's row (or column) of squares over the
-/// pixel, as [`Interior::StraddlesU`] and [`Interior::StraddlesV`] claim:
-/// then each sub-point's parity is its moving coordinate's, flipped when
-/// the fixed coordinate's floor (the centre's, which every sub-point
-/// shares) is odd: the same count from the same sums, for about half the
-/// arithmetic. Most straddling pixels cross one grid line (35k of the
-/// sphere's 51k); single thread, its PRSS stage 22.96–23.48 → 22.48–22.87
-/// ms (BENCHMARKS.md).
-#[inline(always)]
-fn checker_average_on<const AXES: u8>(
-    g: &Grid,
-    taps: &Taps,
-    size: f64,
-    colors: &[[f32; 3]; 2],
-) -> [f32; 3] {
-    let inv = 1.0 / size;
-    // In place: `Grid::map` left its closures out of line.
-    let mut gs: Grid = *g;
-    for p in gs.iter_mut().flatten() {
-        *p = [p[0] * inv, p[1] * inv];
-    }
-    let n = taps.t.len();
-    let isa = crate::simd::Isa::current();
-    let mut odd = crate::with_isa!(isa, L, _M => if L >= 4 {
-        odd_count_chunked::<L, AXES>(&gs, taps)
-    } else {
-        odd_count::<AXES>(&gs, taps)
-    });
-    // A fixed coordinate's floor (the centre's: all sub-points share it)
-    // flips every parity when odd.
-    let fixed_odd = (0..2).any(|k| AXES & (1 << k) == 0 && floor_fast(gs[2][2][k]) & 1 == 1);
-    if fixed_odd {
-        odd = n * n - odd;
-    }
-    let even = n * n - odd;
-    std::array::from_fn(|k| {
-        ((colors[0][k] as f64 * even as f64 + colors[1][k] as f64 * odd as f64) / (n * n) as f64)
-            as f32
-    })
-}
-
-/// The checkerboard's square parity at every sub-point of `taps` of the map
-/// `g`, a row of sub-points per word (bit `ix` of word `jy`): the points
-/// [`rows`] and [`cols`] give, bit for bit (the same sums in the same
-/// order, a chunk of sub-points at a time), and the parity of
-/// `⌊u/size⌋ + ⌊v/size⌋` from the same divisions as [`Backdrop::color`], by
-/// [`crate::simd::odd_floor_sum_mask`].
-fn checker_parities(g: &Grid, taps: &Taps, size: f64) -> Vec<u64> {
-    let isa = crate::simd::Isa::current();
-    crate::with_isa!(isa, L, _M => checker_parities_in::<L>(g, taps, size))
-}
-
-#[inline(always)]
-fn checker_parities_in<const L: usize>(g: &Grid, taps: &Taps, size: f64) -> Vec<u64> {
-    let n = taps.t.len();
-    let mut out = Vec::with_capacity(n);
-    for wy in &taps.w {
-        let r = rows(g, wy);
-        let mut row = 0u64;
-        for (c, wc) in taps.w_chunks.iter().enumerate() {
-            let (mut hx, mut hy) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
-            for (i, ri) in r.iter().enumerate() {
-                for m in 0..CHUNK {
-                    hx[m] += wc[i][m] * ri[0];
-                    hy[m] += wc[i][m] * ri[1];
-                }
-            }
-            let (qx, qy) = (hx.map(|h| h / size), hy.map(|h| h / size));
-            // SAFETY: L == 8 only under Isa::Avx512 (`with_isa!`).
-            let mask = unsafe { crate::simd::odd_floor_sum_mask::<L>(&qx, &qy) };
-            let valid = (n - c * CHUNK).min(CHUNK);
-            row |= (mask as u64 & ((1u64 << valid) - 1)) << (c * CHUNK);
-        }
-        out.push(row);
-    }
-    out
-}
-
-/// Sub-points of `taps` on odd squares of the unit checkerboard, one at a
-/// time with integer floors (no rounding instruction on the x86-64 baseline).
-fn odd_count<const AXES: u8>(gs: &Grid, taps: &Taps) -> usize {
-    let n = taps.t.len();
-    let mut odd = 0usize;
-    for jy in 0..n {
-        let r = rows(gs, &taps.w[jy]);
-        for ix in 0..n {
-            let h = cols(&r, &taps.w[ix]);
-            let f = |k: usize| {
-                if AXES & (1 << k) != 0 {
-                    floor_fast(h[k])
-                } else {
-                    0
-                }
-            };
-            odd += (f(0).wrapping_add(f(1)) & 1) as usize;
-        }
-    }
-    odd
-}
-
-/// [`odd_count`] a chunk of sub-points at a time, as vectors; only inside a
-/// function compiled with a rounding instruction, `L` being that
-/// instruction set's lanes (`with_isa!`, see [`checker_average`]): the
-/// parities come from [`crate::simd::odd_floor_sum_mask`].
-/// The rows of the grid combine for [`CHUNK`] sub-point rows at once (lane
-/// `k` is row `cy·CHUNK + k`), then each row's columns for a chunk of
-/// sub-points; the sums run in the order of [`rows`] and [`cols`].
-/// Only the coordinates in `AXES` are computed; the others stay 0 (even).
-#[inline(always)]
-fn odd_count_chunked<const L: usize, const AXES: u8>(gs: &Grid, taps: &Taps) -> usize {
-    let n = taps.t.len();
-    let (du, dv) = (AXES & U != 0, AXES & V != 0);
-    let mut odd = 0usize;
-    for (cy, wy) in taps.w_chunks.iter().enumerate() {
-        // r[i][axis][k]: Σ_j wy[j][k] gs[j][i][axis].
-        let mut r = [[[0.0f64; CHUNK]; 2]; 5];
-        for (j, row) in gs.iter().enumerate() {
-            for (ri, p) in r.iter_mut().zip(row) {
-                for k in 0..CHUNK {
-                    if du {
-                        ri[0][k] += wy[j][k] * p[0];
-                    }
-                    if dv {
-                        ri[1][k] += wy[j][k] * p[1];
-                    }
-                }
-            }
-        }
-        for k in 0..(n - cy * CHUNK).min(CHUNK) {
-            for (c, wc) in taps.w_chunks.iter().enumerate() {
-                let (mut hx, mut hy) = ([0.0f64; CHUNK], [0.0f64; CHUNK]);
-                for (i, ri) in r.iter().enumerate() {
-                    for m in 0..CHUNK {
-                        if du {
-                            hx[m] += wc[i][m] * ri[0][k];
-                        }
-                        if dv {
-                            hy[m] += wc[i][m] * ri[1][k];
-                        }
-                    }
-                }
-                let live = (n - c * CHUNK).min(CHUNK);
-                let live_mask = ((1u16 << live) - 1) as u8;
-                // SAFETY: L == 8 only under Isa::Avx512 (`with_isa!`).
-                let mask = unsafe { crate::simd::odd_floor_sum_mask::<L>(&hx, &hy) };
-                odd += (mask & live_mask).count_ones() as usize;
-            }
-        }
-    }
-    odd
 }
 
 /// Footprint colour of one pixel, or `None` to re-trace it.
@@ -1991,66 +1354,6 @@ mod tests {
         out
     }
     use crate::scene::Pattern;
-
-    #[test]
-    fn vector_checker_count_matches_the_integer_count() {
-        let mut rng = 0x9e37_79b9_7f4a_7c15u64;
-        let mut next = || {
-            rng ^= rng << 13;
-            rng ^= rng >> 7;
-            rng ^= rng << 17;
-            (rng >> 11) as f64 / (1u64 << 53) as f64
-        };
-        let specials = [f64::NAN, f64::INFINITY, -1e300, 3e18, -9.3e15, 4.5e15 + 1.0];
-        for n in [1, 3, 8, 11, 16] {
-            for map in [PrssMap::Bilinear, PrssMap::Biquadratic, PrssMap::Bicubic] {
-                let taps = Taps::new(n, map);
-                for case in 0..200 {
-                    let scale = [0.3, 2.0, 40.0][case % 3];
-                    let mut g: Grid = std::array::from_fn(|j| {
-                        std::array::from_fn(|i| {
-                            [
-                                scale * (i as f64 + next() - 2.5),
-                                scale * (j as f64 + next() - 2.5),
-                            ]
-                        })
-                    });
-                    if case % 7 == 0 {
-                        g[case % 5][(case / 5) % 5][case % 2] = specials[case % specials.len()];
-                    }
-                    let want = odd_count::<BOTH>(&g, &taps);
-                    // One coordinate alone counts as both with the other
-                    // zeroed (an even floor at every sub-point).
-                    let zeroed = |k: usize| {
-                        let mut z = g;
-                        z.iter_mut().flatten().for_each(|p| p[k] = 0.0);
-                        odd_count::<BOTH>(&z, &taps)
-                    };
-                    let (want_u, want_v) = (zeroed(1), zeroed(0));
-                    assert_eq!(
-                        odd_count::<U>(&g, &taps),
-                        want_u,
-                        "n {n} {map:?} case {case}"
-                    );
-                    assert_eq!(
-                        odd_count::<V>(&g, &taps),
-                        want_v,
-                        "n {n} {map:?} case {case}"
-                    );
-                    for isa in crate::simd::Isa::available() {
-                        let (got, got_u, got_v) = crate::with_isa!(isa, L, _M => (
-                            odd_count_chunked::<L, BOTH>(&g, &taps),
-                            odd_count_chunked::<L, U>(&g, &taps),
-                            odd_count_chunked::<L, V>(&g, &taps),
-                        ));
-                        assert_eq!(got, want, "{isa:?} n {n} {map:?} case {case}");
-                        assert_eq!(got_u, want_u, "{isa:?} n {n} {map:?} case {case} u");
-                        assert_eq!(got_v, want_v, "{isa:?} n {n} {map:?} case {case} v");
-                    }
-                }
-            }
-        }
-    }
 
     /// A tabulated moved surface shows, at every sub-point, the colour the
     /// moved hit gives there, for every instruction set: hits and Jacobians
@@ -2386,21 +1689,6 @@ mod tests {
         assert!(checked > 3000);
     }
 
-    /// The quantile starts within 1e-6 of the converged one, which inverts
-    /// `phi_cdf` to its own accuracy, over the whole range edge_line uses.
-    #[test]
-    fn inverse_phi_inverts_the_cdf() {
-        for k in 0..=2000 {
-            let p = 1e-4 + (1.0 - 2e-4) * k as f64 / 2000.0;
-            let x = inverse_phi(p);
-            assert!(
-                (footprint::phi_cdf(x) - p).abs() < 1e-12 * (1.0 + 1.0 / p),
-                "{p}"
-            );
-            assert!((quantile_guess(p) - x).abs() < 1e-6, "{p}: {x}");
-        }
-    }
-
     fn checker(size: f64) -> Backdrop {
         Backdrop {
             center: DVec3::ZERO,
@@ -2641,61 +1929,6 @@ mod tests {
             }
         }
         f
-    }
-
-    /// The window sums of a window inside the image, from the keys and the
-    /// precomputed totals, are those of the general loop, bit for bit, for
-    /// every centre state: pieces by event count, pixels without a hit, and
-    /// non-finite hits or event counts.
-    #[test]
-    fn inside_window_sums_match_the_general_sums() {
-        let (w, h) = (23u32, 19u32);
-        let mut f = Film::new(w, h);
-        for i in 0..(w * h) as usize {
-            let k = (i * 2654435761) % 97;
-            f.u[i] = if k < 9 { f32::NAN } else { k as f32 };
-            f.v[i] = if k == 11 { f32::INFINITY } else { 1.0 };
-            f.events[i] = match k % 5 {
-                0 => f32::NAN,
-                1 | 2 => 0.0,
-                _ => 2.0,
-            };
-        }
-        let map = HitMap::new(&f);
-        let ew = edge_weights();
-        let r = EDGE_RADIUS;
-        let mut same = 0;
-        for y in r..h as i64 - r {
-            for x in r..w as i64 - r {
-                for centre in [None, Some(0.0), Some(2.0), Some(f32::NAN)] {
-                    let fast = window_sums_inside(&map, ew, x, y, centre);
-                    let slow = window_sums(&map, ew, x, y, centre);
-                    assert_eq!(
-                        [
-                            fast.num,
-                            fast.den,
-                            fast.dnum[0],
-                            fast.dnum[1],
-                            fast.dden[0],
-                            fast.dden[1]
-                        ]
-                        .map(f64::to_bits),
-                        [
-                            slow.num,
-                            slow.den,
-                            slow.dnum[0],
-                            slow.dnum[1],
-                            slow.dden[0],
-                            slow.dden[1]
-                        ]
-                        .map(f64::to_bits),
-                        "({x}, {y}) {centre:?}"
-                    );
-                    same += (fast.num > 0.0) as usize;
-                }
-            }
-        }
-        assert!(same > 100, "{same}");
     }
 
     #[test]
