@@ -414,17 +414,37 @@ impl Cache {
         Cache::default()
     }
 
-    /// Also persist fields and tags under `dir` (created if missing).
+    /// Also persist fields and tags under `dir`. A missing `dir` is
+    /// created, with a warning, but not a missing parent: a mistyped path
+    /// would otherwise give each job of a split frame a cache of its own.
     pub fn with_dir(dir: &Path) -> std::io::Result<Cache> {
+        let mut warnings = Vec::new();
         if dir.exists() && !dir.is_dir() {
             return Err(std::io::Error::new(
                 std::io::ErrorKind::InvalidInput,
                 "exists and is not a directory",
             ));
         }
-        std::fs::create_dir_all(dir)?;
+        if !dir.exists() {
+            let parent = dir.parent().filter(|p| !p.as_os_str().is_empty());
+            if let Some(p) = parent.filter(|p| !p.is_dir()) {
+                return Err(std::io::Error::new(
+                    std::io::ErrorKind::NotFound,
+                    format!(
+                        "its parent {} does not exist (only the cache directory itself is created)",
+                        p.display()
+                    ),
+                ));
+            }
+            std::fs::create_dir(dir)?;
+            warnings.push(format!(
+                "cache directory {} did not exist: created it, empty",
+                dir.display()
+            ));
+        }
         Ok(Cache {
             dir: Some(dir.to_path_buf()),
+            warnings,
             ..Cache::default()
         })
     }
@@ -878,6 +898,29 @@ mod tests {
         let e = cache.prepare(&s2, &LoadOptions::default()).unwrap();
         assert!(!a.field.ptr_eq(&e.field) && e.times.prefilter_s > 0.0);
         assert!(e.times.load_s > 0.0);
+    }
+
+    /// A missing cache directory is created with a warning; one whose
+    /// parent is missing is refused, and nothing is created.
+    #[test]
+    fn cache_directory_is_created_but_not_its_parents() {
+        let root = std::env::temp_dir().join(format!("snell-cache-dir-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        std::fs::create_dir(&root).unwrap();
+        let dir = root.join("cache");
+        let c = Cache::with_dir(&dir).unwrap();
+        assert!(dir.is_dir());
+        assert!(
+            c.warnings.len() == 1 && c.warnings[0].contains("did not exist"),
+            "{:?}",
+            c.warnings
+        );
+        assert!(Cache::with_dir(&dir).unwrap().warnings.is_empty());
+        let deep = root.join("typo/cache");
+        let e = Cache::with_dir(&deep).err().unwrap().to_string();
+        assert!(e.contains("parent") && e.contains("typo"), "{e}");
+        assert!(!root.join("typo").exists());
+        std::fs::remove_dir_all(&root).unwrap();
     }
 
     #[test]

@@ -756,6 +756,8 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "-o a device", "render {sphere} -o /dev/null", &["/dev/null", "regular file"]),
         bad("flag", "--memory-limit not a size (render)", "render {sphere} -o out.png --memory-limit lots", &["--memory-limit", "lots"]),
         bad("flag", "--cache is a file", "render {sphere} -o out.png --cache good.txt", &["good.txt", "not a directory"]),
+        bad("flag", "a frame pattern without --orbit", "render {sphere} -o f-%03d.png", &["-o f-%03d.png", "--orbit"]),
+        bad("flag", "--cache in a missing folder", "render {sphere} -o out.png --cache nofolder/cache", &["nofolder", "parent", "does not exist"]),
         bad("flag", "merge -o not named .exr", "merge k0.exr k1.exr -o out.png", &["out.png", ".exr"]),
         bad("flag", "merge -o over a part", "merge k0.exr k1.exr -o k1.exr", &["k1.exr", "input"]),
         bad("flag", "-o over the backdrop photograph", "render bd.toml -o bd.png", &["bd.png", "input"]),
@@ -1628,4 +1630,71 @@ fn compare_images_reports_metrics_and_writes_a_diff() {
     let o = run(&["compare", &s(&small), &s(&a), "--diff", &s(&diff3)]);
     assert_fails(&o, &["small.png", "differ in size"]);
     assert!(!diff3.exists());
+}
+
+/// Every key a scene file takes stands in README.md's table of keys: each
+/// section's refusal of an unknown key lists that section's keys, and
+/// every one of them must be a row's (`a.b.c`, or a bare `d` after it in
+/// the same cell, which shares its section).
+#[test]
+fn every_scene_key_is_in_the_readme_table() {
+    let readme = std::fs::read_to_string(root().join("README.md")).unwrap();
+    let mut documented = Vec::new();
+    for row in readme.lines().filter(|l| l.starts_with("| `")) {
+        let cell = row.split('|').nth(1).unwrap();
+        let mut section = String::new();
+        for item in cell.split(',').map(|i| i.trim().trim_matches('`')) {
+            match item.rsplit_once('.') {
+                Some((s, _)) => {
+                    section = s.to_string();
+                    documented.push(item.to_string());
+                }
+                None => documented.push(format!("{section}.{item}")),
+            }
+        }
+    }
+    let scene = root().join("scenes/sphere.toml");
+    let listed = |section: &str, set: &str| -> Vec<String> {
+        let e = snell::scene::Scene::load(&scene, &[set.to_string()])
+            .unwrap_err()
+            .to_string();
+        let (_, keys) = e
+            .split_once("expected one of ")
+            .unwrap_or_else(|| panic!("{set}: {e}"));
+        keys.split(", ")
+            .map(|k| format!("{section}.{}", k.trim().trim_matches('`')))
+            .collect()
+    };
+    let mut keys = Vec::new();
+    for section in [
+        "image",
+        "camera",
+        "volume",
+        "volume.raw",
+        "surface",
+        "backdrop",
+        "render",
+    ] {
+        keys.extend(listed(section, &format!("{section}.zzz=1")));
+    }
+    for kind in ["sphere", "marschner-lobb"] {
+        keys.extend(listed(
+            "volume.phantom",
+            &format!("volume.phantom={{kind=\"{kind}\", zzz=1}}"),
+        ));
+    }
+    assert!(keys.len() > 50, "{keys:?}");
+    // A table (`volume.raw`) is documented by its keys.
+    let missing: Vec<&String> = keys
+        .iter()
+        .filter(|k| {
+            !documented
+                .iter()
+                .any(|d| d == *k || d.starts_with(&format!("{k}.")))
+        })
+        .collect();
+    assert!(
+        missing.is_empty(),
+        "not in README.md's table of scene keys: {missing:?}"
+    );
 }

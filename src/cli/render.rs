@@ -44,6 +44,7 @@ pub struct Args {
     /// Keep prefiltered coefficients and cell tags in DIR, keyed by the
     /// volume's content hash, and reuse them in later runs (a re-render with
     /// a new camera, ior or backdrop skips the prefilter and classification).
+    /// A missing DIR is created (with a warning), a missing parent refused.
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
     /// Render only the pixels [X0, X1) × [Y0, Y1) of the image: one part of a
@@ -335,6 +336,12 @@ impl Output {
             Some(_) => Some(
                 FramePattern::parse(path)
                     .with_context(|| format!("{flag} {}: with --orbit", path.display()))?,
+            ),
+            // A frame pattern without frames is a forgotten --orbit, not a
+            // file to be named with a literal `%03d`.
+            None if FramePattern::parse(path).is_ok() => anyhow::bail!(
+                "{flag} {}: the name holds a frame number (%d); it needs --orbit N (or a plain name for one image)",
+                path.display()
             ),
             None => None,
         };

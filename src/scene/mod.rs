@@ -142,6 +142,8 @@ pub struct Scene {
     overrides: Vec<String>,
     /// The keys the file or `--set` wrote (see [`written_keys`]).
     written: Vec<(String, String)>,
+    /// The keys the file alone wrote.
+    file_keys: Vec<String>,
 }
 
 impl Scene {
@@ -186,6 +188,9 @@ impl Scene {
         let mut table: toml::Table = text
             .parse()
             .map_err(|e: toml::de::Error| syntax_error(text, path, &e))?;
+        let mut file_written = Vec::new();
+        written_keys(&table, "", &mut file_written);
+        let file_keys: Vec<String> = file_written.into_iter().map(|(k, _)| k).collect();
         for o in overrides {
             apply_override(&mut table, o)?;
         }
@@ -220,17 +225,19 @@ impl Scene {
             Ok(mut scene) => {
                 scene.overrides = overrides.to_vec();
                 scene.written = written;
+                scene.file_keys = file_keys;
                 Ok(scene)
             }
-            Err(e) => Err(blame_override(e, overrides, &written)),
+            Err(e) => Err(blame_override(e, overrides, &written, &file_keys)),
         }
     }
 
     /// Loads (or builds) the volume and applies the scene's spacing override.
-    /// An error on a key a `--set` wrote names that `--set`.
+    /// An error on a key a `--set` wrote names that `--set`, as does the
+    /// reader's error on a file a `--set volume.path` named.
     pub fn load_volume(&self, opts: &LoadOptions) -> Result<Volume, SceneError> {
         self.load_volume_unblamed(opts)
-            .map_err(|e| blame_override(e, &self.overrides, &self.written))
+            .map_err(|e| blame_override(e, &self.overrides, &self.written, &self.file_keys))
     }
 
     fn load_volume_unblamed(&self, opts: &LoadOptions) -> Result<Volume, SceneError> {
@@ -256,7 +263,14 @@ impl Scene {
                             file.display()
                         ),
                     },
-                    e => e.into(),
+                    // The file a `--set volume.path` named.
+                    e => match culprit_override("volume.path", &self.overrides) {
+                        Some(o) => SceneError::Override {
+                            arg: o.clone(),
+                            msg: e.to_string(),
+                        },
+                        None => e.into(),
+                    },
                 })?
             }
             VolumeSource::Phantom(spec) => {
@@ -323,9 +337,21 @@ impl Scene {
     }
 
     /// Refuses (before anything is allocated) a render whose frame buffers
-    /// and tile scratch would exceed `limit` bytes.
+    /// and tile scratch for `threads` worker threads would exceed `limit`
+    /// bytes. An error on a key a `--set` wrote names that `--set`.
     pub fn check_memory(&self, limit: u64, threads: usize) -> Result<(), SceneError> {
-        let (frame, scratch) = self.memory_need(threads);
+        self.memory_check(limit, Some(threads))
+            .map_err(|e| blame_override(e, &self.overrides, &self.written, &self.file_keys))
+    }
+
+    /// [`Scene::check_memory`] with one thread, the least any render takes:
+    /// while the scene is read, before the thread count is known.
+    fn check_memory_least(&self, limit: u64) -> Result<(), SceneError> {
+        self.memory_check(limit, None)
+    }
+
+    fn memory_check(&self, limit: u64, threads: Option<usize>) -> Result<(), SceneError> {
+        let (frame, scratch) = self.memory_need(threads.unwrap_or(1));
         let need = frame.saturating_add(scratch);
         if need <= limit {
             return Ok(());
@@ -340,16 +366,20 @@ impl Scene {
             }
             .into(),
             msg: format!(
-                "a {}x{} image at {} rays per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples, render.tile or --threads, or raise SNELL_MEMORY_LIMIT (--memory-limit)",
+                "a {}x{} image at {} per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples, render.tile or --threads, or raise SNELL_MEMORY_LIMIT (--memory-limit)",
                 self.width,
                 self.height,
-                self.rays_per_pixel(),
+                match self.rays_per_pixel() {
+                    1 => "1 ray".to_string(),
+                    n => format!("{n} rays"),
+                },
                 hb(need),
                 hb(frame),
                 hb(scratch),
-                match threads.max(1) {
-                    1 => "1 thread".to_string(),
-                    n => format!("{n} threads"),
+                match threads.map(|n| n.max(1)) {
+                    None => "at least one thread".to_string(),
+                    Some(1) => "1 thread".to_string(),
+                    Some(n) => format!("{n} threads"),
                 },
                 self.render.tile,
                 self.render.tile,
@@ -489,6 +519,11 @@ checker = 8.0
             ),
             (&["render.tolerance=0"], "--set render.tolerance=0: "),
             (
+                &["backdrop.normal=[0.0, 0.0, nan]"],
+                "--set backdrop.normal=[0.0, 0.0, nan]: ",
+            ),
+            (&["foo.bar=1"], "--set foo.bar=1: [foo] "),
+            (
                 &["volume.phantom={kind=\"sphere\", size=0}"],
                 "--set volume.phantom={kind=\"sphere\", size=0}: [volume.phantom.size] ",
             ),
@@ -589,6 +624,74 @@ checker = 8.0
             .unwrap_err()
             .to_string();
         assert!(e.starts_with("test.toml: [volume.phantom.size] "), "{e}");
+    }
+
+    /// An error on a key the file wrote names the file, and the overrides of
+    /// its section that may have caused it; the others are left out.
+    #[test]
+    fn file_errors_list_the_overrides_of_their_section() {
+        let e = parse(&["camera.kind=orthographic", "surface.ior=1.4"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("test.toml: [camera.height] ")
+                && e.ends_with(" (read with --set camera.kind=orthographic)"),
+            "{e}"
+        );
+        let e = parse_text(
+            |s| s.replace("size = 32", "size = 32\nradius = 10.0"),
+            &["volume.phantom.kind=marschner-lobb"],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(
+            e.starts_with("test.toml: [volume.phantom.radius] ")
+                && e.contains("--set volume.phantom.kind"),
+            "{e}"
+        );
+        // No override of the section: the message alone.
+        let e = parse_text(
+            |s| s.replace("ior = 1.5", "ior = -1.5"),
+            &["image.width=32"],
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(!e.contains("--set"), "{e}");
+    }
+
+    /// A relative path typed with `--set` is read from the current
+    /// directory; the file's own paths from the file's folder.
+    #[test]
+    fn override_paths_are_read_from_the_current_directory() {
+        let file = |s: &Scene| match &s.volume {
+            VolumeSource::File { path, .. } => path.clone(),
+            v => panic!("{v:?}"),
+        };
+        let s = Scene::parse(
+            SCENE,
+            Path::new("scenes/test.toml"),
+            &["volume.path=data/v.nrrd".into()],
+        )
+        .unwrap();
+        let cwd = std::env::current_dir().unwrap();
+        assert_eq!(file(&s), cwd.join("data/v.nrrd"));
+        let s = Scene::parse(
+            &SCENE.replace(
+                "[volume.phantom]\nkind = \"sphere\"\nsize = 32\nformat = \"u8\"",
+                "[volume]\npath = \"data/v.nrrd\"",
+            ),
+            Path::new("scenes/test.toml"),
+            &[],
+        )
+        .unwrap();
+        assert_eq!(file(&s), Path::new("scenes/data/v.nrrd"));
+        let s = Scene::parse(
+            SCENE,
+            Path::new("t.toml"),
+            &["volume.path=/abs/v.nrrd".into()],
+        )
+        .unwrap();
+        assert_eq!(file(&s), Path::new("/abs/v.nrrd"));
     }
 
     fn parse_text(edit: impl Fn(&str) -> String, o: &[&str]) -> Result<Scene, SceneError> {

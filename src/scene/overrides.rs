@@ -3,8 +3,15 @@
 //! the file), and an error on a key an override wrote blamed on that
 //! override.
 
+use std::path::Path;
+
 use super::SceneError;
 use super::words::number_reason;
+
+/// The keys whose value is a file path. The scene file's paths are read
+/// from its folder; a path typed with `--set` is read from the current
+/// directory, as every other path on the command line is.
+const PATH_KEYS: [&str; 2] = ["volume.path", "backdrop.image"];
 
 /// Applies `section.key=value` (value in TOML syntax; bare words are strings).
 pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneError> {
@@ -30,6 +37,12 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
             None => toml::Value::String(value.to_string()),
         },
     };
+    let parsed = match parsed {
+        toml::Value::String(p) if PATH_KEYS.contains(&key.as_str()) => {
+            toml::Value::String(from_current_dir(p))
+        }
+        v => v,
+    };
     let mut cur = table;
     for p in &parts[..parts.len() - 1] {
         let entry = cur
@@ -52,6 +65,19 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
     Ok(())
 }
 
+/// `p` as an absolute path when it is relative, so that the scene's folder
+/// does not become its base (kept as given if the current directory cannot
+/// be read or is not UTF-8).
+fn from_current_dir(p: String) -> String {
+    if p.is_empty() || Path::new(&p).is_absolute() {
+        return p;
+    }
+    std::path::absolute(&p)
+        .ok()
+        .and_then(|a| a.to_str().map(str::to_string))
+        .unwrap_or(p)
+}
+
 /// The key a `--set key=value` sets, as the scene's keys are written
 /// (`camera . fov_y` is `camera.fov_y`).
 fn override_key(arg: &str) -> String {
@@ -69,12 +95,18 @@ pub(super) fn culprit_override<'a>(key: &str, overrides: &'a [String]) -> Option
 }
 
 /// An error on a key an override set (or inside it) is the override's: it
-/// names `--set key=value` instead of the file. `written` is what the file
-/// and the overrides wrote ([`written_keys`]).
+/// names `--set key=value` instead of the file. So is an error on a section
+/// the file does not have, which only an override can have made (an unknown
+/// one, say). An error on a key the file wrote is the file's, but one an
+/// override of the same section may have caused (`camera.kind` makes
+/// `camera.height` needed) lists those overrides after the message.
+/// `written` is what the file and the overrides wrote ([`written_keys`]),
+/// `file_keys` what the file alone did.
 pub(super) fn blame_override(
     e: SceneError,
     overrides: &[String],
     written: &[(String, String)],
+    file_keys: &[String],
 ) -> SceneError {
     let SceneError::Key { key, msg, path } = e else {
         return e;
@@ -88,6 +120,16 @@ pub(super) fn blame_override(
             .then(|| culprit_override("surface.filter", overrides))
             .flatten()
     });
+    let culprit = culprit.or_else(|| {
+        let inside = format!("{key}.");
+        if file_keys.contains(&key) {
+            return None;
+        }
+        overrides
+            .iter()
+            .rev()
+            .find(|o| override_key(o).starts_with(&inside))
+    });
     match culprit {
         Some(o) => SceneError::Override {
             arg: o.clone(),
@@ -97,7 +139,20 @@ pub(super) fn blame_override(
                 format!("[{key}] {msg}")
             },
         },
-        None => SceneError::Key { path, key, msg },
+        None => {
+            let section = key.split('.').next().unwrap_or_default();
+            let near: Vec<String> = overrides
+                .iter()
+                .filter(|o| override_key(o).split('.').next() == Some(section))
+                .map(|o| format!("--set {o}"))
+                .collect();
+            let msg = if near.is_empty() {
+                msg
+            } else {
+                format!("{msg} (read with {})", near.join(", "))
+            };
+            SceneError::Key { path, key, msg }
+        }
     }
 }
 

@@ -357,11 +357,14 @@ pub(super) fn resolve(
     // vectors (1e155) square without overflowing to an infinite length.
     let normal = unit_scale(vec3(b.normal));
     let u_raw = unit_scale(vec3(b.u_axis));
-    if !(center.is_finite() && normal.is_finite() && u_raw.is_finite()) {
-        return Err(bad(
-            "backdrop",
-            "center, normal and u_axis must be finite".into(),
-        ));
+    for (key, v, raw) in [
+        ("backdrop.center", center, b.center),
+        ("backdrop.normal", normal, b.normal),
+        ("backdrop.u_axis", u_raw, b.u_axis),
+    ] {
+        if !v.is_finite() {
+            return Err(bad(key, format!("must be finite, got {raw:?}")));
+        }
     }
     if normal.length() < 1e-12 {
         return Err(bad("backdrop.normal", "must not be zero".into()));
@@ -543,6 +546,7 @@ pub(super) fn resolve(
         ignored,
         overrides: Vec::new(),
         written: Vec::new(),
+        file_keys: Vec::new(),
         path: path.to_path_buf(),
         width: w,
         height: h,
@@ -559,7 +563,7 @@ pub(super) fn resolve(
     // scene file is accepted does not depend on the machine's cores; a
     // renderer checks again with its own thread count (`snell render` does
     // once its pool is built).
-    scene.check_memory(crate::volume::limits::default_memory_limit(), 1)?;
+    scene.check_memory_least(crate::volume::limits::default_memory_limit())?;
     Ok(scene)
 }
 
