@@ -258,18 +258,21 @@ fn bad_input_fails_fast_with_one_line() {
         ]),
         "--threads",
     );
+    // Without its scene files nothing is made, not even the output folder.
+    let fresh = tmp.path("fresh-out");
     assert_fails(
         &snell(&[
             "bench",
             "--suite",
             "smoke",
             "--out",
-            s(&out),
+            s(&fresh),
             "--scenes",
             s(&tmp.0),
         ]),
         "sphere.toml",
     );
+    assert!(!fresh.exists(), "{} was created", fresh.display());
     // Malformed markers are refused before any rendering.
     let md = tmp.path("B.md");
     std::fs::write(

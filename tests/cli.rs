@@ -137,6 +137,30 @@ fn sample_prints_csv_in_input_order() {
     assert!(lines[1].starts_with("10,20,30,"));
     assert!(lines[2].starts_with("10.5,20.25,30.75,"));
     assert_eq!(lines[2].split(',').count(), 7);
+    assert!(stderr(&o).is_empty(), "{}", stderr(&o));
+    // Points off the grid are evaluated (mirror boundary) and counted.
+    let off = t.write(
+        "off.txt",
+        b"-1,20,30
+10,20,30
+10,20,1e6
+",
+    );
+    let o = run(&[
+        "sample",
+        data("engine.nrrd").to_str().unwrap(),
+        "--filter",
+        "bspline3",
+        "--points",
+        off.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 4);
+    let err = stderr(&o);
+    assert!(
+        err.starts_with("warning: 2 of 3 points lie outside the grid") && err.contains("mirror"),
+        "{err}"
+    );
 }
 
 #[test]
@@ -745,7 +769,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "--orbit with a bad frame number", "render {sphere} -o f%3d.png --orbit 8", &["%0Nd", "got %3d"]),
         bad("flag", "--orbit patterns meeting", "render {sphere} -o f%d.png --hits h%d.exr --exr h%02d.exr --orbit 12", &["--hits h%d.exr (frame 10)", "--exr h%02d.exr (frame 10)", "h10.exr"]),
         bad("flag", "--orbit with --trace", "render {sphere} -o f%d.png --orbit 8 --trace t.json", &["--trace", "--orbit"]),
-        bad("flag", "--orbit 0", "render {sphere} -o f%d.png --orbit 0", &["--orbit", "1..=3600"]),
+        bad("flag", "--orbit 0", "render {sphere} -o f%d.png --orbit 0", &["--orbit", "must be from 1 to 3600"]),
         bad("file", "merge: a part that is not an EXR", "merge empty.nrrd -o out.exr", &["empty.nrrd", "OpenEXR"]),
         bad("flag", "--threads 0", "render {sphere} -o out.png --threads 0", &["--threads"]),
         bad("flag", "--threads not a number", "render {sphere} -o out.png --threads two", &["--threads", "two"]),
@@ -832,7 +856,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "--set seed beyond TOML's integers", "render {sphere} -o out.png --set render.seed=18446744073709551615", &["--set render.seed=18446744073709551615:", "up to 9223372036854775807"]),
         bad("scene", "camera position too far out", "render far.toml -o out.png", &["far.toml", "[camera.position]", "1e150", "-1e307"]),
         bad("scene", "ior as text", "render iortext.toml -o out.png", &["[surface.ior]", "expected a number, got the text \"1.5\""]),
-        bad("scene", "image width with a fraction", "render wfloat.toml -o out.png", &["[image.width]", "expected a whole number from 0 to 4294967295, got 32.0"]),
+        bad("scene", "image width with a fraction", "render wfloat.toml -o out.png", &["[image.width]", "expected a whole number from 1 to 32768, got 32.0"]),
         bad("scene", "--set a section to a number", "render {sphere} -o out.png --set surface=3", &["--set surface=3:", "expected a table of surface settings, got 3"]),
         bad("scene", "phantom size negative", "render negsize.toml -o out.png", &["negsize.toml", "[volume.phantom.size]", "got -64"]),
         bad("scene", "phantom format unknown", "render u12.toml -o out.png", &["u12.toml", "[volume.phantom.format]", "u12"]),

@@ -141,11 +141,12 @@ pub fn bench(
     if opts.threads == Some(0) {
         return Err(BenchError::NoThreads);
     }
-    prepare_out_dir(&opts.out_dir)?;
+    // What can be refused is refused before the output directory exists.
+    check_scene_files(suite, &opts.scenes_dir)?;
     if let Some(p) = &opts.update {
         read_update_target(p, &suite.name)?;
     }
-    check_scene_files(suite, &opts.scenes_dir)?;
+    prepare_out_dir(&opts.out_dir)?;
     let pool = rayon::ThreadPoolBuilder::new()
         .num_threads(opts.threads.unwrap_or(0))
         .build()

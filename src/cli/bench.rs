@@ -38,7 +38,7 @@ pub struct Args {
     pub update: Option<PathBuf>,
     /// Worker threads (default: all cores; 2 for each renderer with --peer,
     /// and 2 with --targets, whose verdicts need 2); 1 to 1024.
-    #[arg(long, value_parser = super::common::thread_count)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::common::thread_count)]
     pub threads: Option<usize>,
     /// Directory of the scene files.
     #[arg(long, default_value = "scenes")]

@@ -64,9 +64,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let (lo, hi) = vol.value_range();
     if !(a.iso >= lo as f64 && a.iso <= hi as f64) {
         eprintln!(
-            "warning: {}: iso-value {} is outside the data range [{lo}, {hi}]; few or no cells hold the surface",
+            "warning: {}: iso-value {} is outside the data range [{}, {}]; few or no cells hold the surface",
             a.volume.display(),
-            a.iso
+            snell::human::exact(a.iso),
+            snell::human::num(lo as f64),
+            snell::human::num(hi as f64)
         );
     }
     let start = std::time::Instant::now();
@@ -120,7 +122,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         "{} — {} at iso {} — {} knot cells ({}x{}x{}), prefilter {:.1} ms",
         a.volume.display(),
         kind,
-        a.iso,
+        snell::human::exact(a.iso),
         total,
         lattice.cells[0],
         lattice.cells[1],

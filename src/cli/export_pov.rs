@@ -33,7 +33,7 @@ pub struct Args {
     pub max_gradient: Option<f64>,
     /// Threads for the printed command lines and for --run, 1 to 1024
     /// (default: all cores, as `render`).
-    #[arg(long, value_parser = super::common::thread_count)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::common::thread_count)]
     pub threads: Option<usize>,
     /// Also run POV-Ray (colour and hit renders) and report its times.
     #[arg(long)]
@@ -119,7 +119,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             dir.join(povray::COLOR_POV).display(),
             dir.join(povray::HITS_POV).display(),
             ex.interpolation.keyword(),
-            scene.surface.iso,
+            exact(scene.surface.iso),
             ex.iso_density,
             ex.ior,
             ex.accuracy,

@@ -35,6 +35,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "mean": st.mean,
             "histogram": st.histogram,
             "suggested_iso": st.suggested_iso,
+            "iso_from_modes": st.iso_from_modes,
             "replaced_nonfinite": vol.replaced_nonfinite,
         });
         println!("{j}");
@@ -75,6 +76,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!("    {:>12} {:>10} {}", num(lo), c, "#".repeat(bar));
     }
     let iso: Vec<String> = st.suggested_iso.iter().map(|&v| num(v)).collect();
-    println!("  iso-values worth trying: {}", iso.join(", "));
+    if st.iso_from_modes {
+        println!("  iso-values worth trying: {}", iso.join(", "));
+    } else if !iso.is_empty() {
+        println!(
+            "  iso-values worth trying: {} (the value range's midpoint: the histogram shows no two materials apart)",
+            iso.join(", ")
+        );
+    }
     Ok(())
 }

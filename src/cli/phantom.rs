@@ -39,7 +39,7 @@ pub struct Output {
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     pub noise: f64,
     /// Noise seed.
-    #[arg(long, default_value_t = 0)]
+    #[arg(long, default_value_t = 0, allow_negative_numbers = true, value_parser = seed)]
     pub seed: u64,
     /// Compress the samples: gzip in NRRD, zlib in MetaImage.
     #[arg(long)]
@@ -49,7 +49,7 @@ pub struct Output {
 #[derive(ClapArgs, Debug)]
 pub struct SphereArgs {
     /// Cube side in samples, 1 to 4096.
-    #[arg(long, default_value_t = 64, value_parser = phantom_size)]
+    #[arg(long, default_value_t = 64, allow_negative_numbers = true, value_parser = phantom_size)]
     pub size: usize,
     /// Radius of the solid core (value 1) in samples (grid units), >= 0.
     #[arg(long, default_value_t = 20.0, allow_negative_numbers = true)]
@@ -76,7 +76,7 @@ pub struct SphereArgs {
 pub struct MlArgs {
     /// Cube side in samples over [-1, 1]³, 1 to 4096 (41 is the original
     /// paper's lattice).
-    #[arg(long, default_value_t = 41, value_parser = phantom_size)]
+    #[arg(long, default_value_t = 41, allow_negative_numbers = true, value_parser = phantom_size)]
     pub size: usize,
     /// The signal's α: the amplitude of the radial ripple against the
     /// slope along z, (1 − sin(πz/2) + α(1 + ρ(r))) / (2(1 + α)) (finite;
@@ -105,6 +105,13 @@ fn phantom_size(s: &str) -> Result<usize, String> {
 }
 
 /// A phantom's error with its setting named as the option that sets it.
+/// `--seed`: any whole number a `u64` holds.
+fn seed(s: &str) -> Result<u64, String> {
+    s.trim()
+        .parse()
+        .map_err(|_| format!("expected a whole number from 0 to {}, got '{s}'", u64::MAX))
+}
+
 fn option_error(e: PhantomError) -> anyhow::Error {
     match e {
         PhantomError::Setting { key, msg } => {

@@ -36,7 +36,7 @@ pub struct Args {
     #[arg(long, value_name = "TRACE.json")]
     pub trace: Option<PathBuf>,
     /// Worker threads, 1 to 1024 (default: all cores).
-    #[arg(long, value_parser = super::common::thread_count)]
+    #[arg(long, allow_negative_numbers = true, value_parser = super::common::thread_count)]
     pub threads: Option<usize>,
     /// Override a scene value, e.g. --set surface.ior=1.33 (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
@@ -65,7 +65,7 @@ pub struct Args {
     /// The output names carry the frame number as printf does, e.g.
     /// -o frames/f-%03d.png (and --hits, --exr likewise); each frame's time is
     /// printed, then the median (steady state: structures cached).
-    #[arg(long, value_name = "N", value_parser = clap::value_parser!(u32).range(1..=snell::scene::orbit::MAX_FRAMES as i64))]
+    #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = frame_count)]
     pub orbit: Option<u32>,
     /// Do not print the stats table.
     #[arg(short, long)]
@@ -554,6 +554,19 @@ fn progress_bar<T>(
     }
     if let Some(b) = bar {
         b.finish_and_clear();
+    }
+}
+
+/// `--orbit`: a frame count from 1 to [`MAX_FRAMES`](snell::scene::orbit::MAX_FRAMES).
+fn frame_count(s: &str) -> Result<u32, String> {
+    let max = snell::scene::orbit::MAX_FRAMES;
+    let n: u64 = s
+        .trim()
+        .parse()
+        .map_err(|_| format!("'{s}' is not a frame count"))?;
+    match u32::try_from(n) {
+        Ok(n) if (1..=max).contains(&n) => Ok(n),
+        _ => Err(format!("must be from 1 to {max}, got {n}")),
     }
 }
 

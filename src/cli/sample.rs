@@ -24,7 +24,8 @@ pub struct Args {
     pub lambda: Option<f64>,
     /// File of points, one `x,y,z` per line in grid coordinates (`-` for
     /// stdin); blank lines, `#` comments and a first line of column names
-    /// (`x,y,z`, as this command writes) are skipped.
+    /// (`x,y,z`, as this command writes) are skipped. Points outside the
+    /// grid are evaluated with the mirror boundary (SPEC.md), with a warning.
     #[arg(long)]
     pub points: PathBuf,
     #[command(flatten)]
@@ -105,6 +106,20 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         parse_points(BufReader::new(f), &name)?
     };
     let vol = a.vol.load(&a.volume)?;
+    let d = vol.dims();
+    let outside = points
+        .iter()
+        .filter(|p| !(0..3).all(|k| (0.0..=(d[k] - 1) as f64).contains(&p[k])))
+        .count();
+    if outside > 0 {
+        eprintln!(
+            "warning: {outside} of {} points lie outside the grid [0, {}] x [0, {}] x [0, {}]; they are evaluated with the mirror boundary (SPEC.md)",
+            points.len(),
+            d[0] - 1,
+            d[1] - 1,
+            d[2] - 1
+        );
+    }
     let field = Field::new(&vol, kind);
     let stdout = std::io::stdout();
     let mut out = std::io::BufWriter::new(stdout.lock());

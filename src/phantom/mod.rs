@@ -13,7 +13,7 @@ use crate::volume::{SampleType, Volume};
 
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PhantomError {
-    #[error("phantom {0}")]
+    #[error("phantom: {0}")]
     Invalid(String),
     /// A setting out of range: its name as in scene files (`size`; the
     /// option of `snell phantom` is `--size`) and what is wrong.
@@ -415,7 +415,10 @@ fn build_grid(
         dims,
         crate::volume::limits::default_memory_limit(),
     )
-    .map_err(|e| PhantomError::Invalid(e.to_string().replacen("phantom: ", "", 1)))?;
+    .map_err(|e| PhantomError::Setting {
+        key: "size",
+        msg: e.to_string().replacen("phantom: ", "", 1),
+    })?;
     let scale = format.full_scale();
     let mut samples = vec![0.0f32; nx * ny * nz];
     samples

@@ -38,12 +38,12 @@ pub(crate) use words::plain_serde_message;
 
 use file::SceneFile;
 use overrides::{blame_override, culprit_override, written_keys};
-use resolve::{phantom_spec, resolve};
+use resolve::{own_range, phantom_spec, resolve};
 use words::syntax_error;
 
 use crate::classify::Method;
 use crate::filter::FilterKind;
-use crate::phantom::PhantomSpec;
+use crate::phantom::{PhantomError, PhantomSpec};
 use crate::volume::{LoadOptions, RawSpec, Volume, VolumeError};
 
 /// Classification the cell traversals (`dda`, `octree`, `distance`) use when
@@ -212,12 +212,16 @@ impl Scene {
             .map_err(|e| {
                 let key = e.path().to_string();
                 let key = if key == "." { "scene".into() } else { key };
-                key_error(key, plain_serde_message(e.into_inner().message()))
+                let msg = own_range(&key, plain_serde_message(e.into_inner().message()));
+                key_error(key, msg)
             })
             .and_then(|file: SceneFile| {
                 let phantom = match &file.volume.phantom {
                     None => None,
-                    Some(v) => Some(phantom_spec(v.clone()).map_err(|(k, m)| key_error(k, m))?),
+                    Some(v) => Some(phantom_spec(v.clone()).map_err(|(k, m)| {
+                        let m = own_range(&k, m);
+                        key_error(k, m)
+                    })?),
                 };
                 resolve(file, phantom, path, &written)
             });
@@ -289,7 +293,14 @@ impl Scene {
                         e => phantom_error(e.to_string()),
                     })?;
                 // Its settings were checked when the scene was read.
-                spec.build().map_err(|e| phantom_error(e.to_string()))?
+                spec.build().map_err(|e| match e {
+                    PhantomError::Invalid(msg) => phantom_error(msg),
+                    PhantomError::Setting { key, msg } => SceneError::Key {
+                        path: self.path.clone(),
+                        key: format!("volume.phantom.{key}"),
+                        msg,
+                    },
+                })?
             }
         };
         if let Some(s) = self.spacing {
@@ -715,7 +726,7 @@ checker = 8.0
         );
         assert_eq!(
             file("width = 64", "width = 32.0"),
-            "test.toml: [image.width] expected a whole number from 0 to 4294967295, got 32.0"
+            "test.toml: [image.width] expected a whole number from 1 to 32768, got 32.0"
         );
         assert_eq!(
             set("surface=3"),
@@ -723,7 +734,7 @@ checker = 8.0
         );
         assert_eq!(
             file("size = 32", "size = -64"),
-            "test.toml: [volume.phantom.size] expected a whole number from 0 to 9223372036854775807, got -64"
+            "test.toml: [volume.phantom.size] expected a whole number from 1 to 4096, got -64"
         );
         assert_eq!(
             file("format = \"u8\"", "format = \"u12\""),

@@ -18,6 +18,46 @@ use crate::filter::FilterKind;
 use crate::phantom::PhantomSpec;
 use crate::volume::{Endian, RawSpec, SampleType};
 
+/// The whole-number settings' ranges: checked when the scene is resolved,
+/// and named by the message for a value that is no whole number at all
+/// (`image.width = 1.5`), in place of the range of its Rust type.
+const WHOLE_RANGES: [(&str, u32, u32); 7] = [
+    ("image.width", 1, MAX_IMAGE_SIDE),
+    ("image.height", 1, MAX_IMAGE_SIDE),
+    ("render.max_events", 1, 100_000),
+    ("render.samples", 1, 64),
+    ("render.prss_samples", 1, 64),
+    ("render.tile", 1, 256),
+    // Checked by the phantom itself.
+    (
+        "volume.phantom.size",
+        1,
+        crate::phantom::MAX_PHANTOM_SIZE as u32,
+    ),
+];
+
+/// The range of whole-number setting `key`, if it has one.
+fn whole_range(key: &str) -> Option<(u32, u32)> {
+    WHOLE_RANGES
+        .iter()
+        .find(|(k, ..)| *k == key)
+        .map(|&(_, lo, hi)| (lo, hi))
+}
+
+/// `msg` (serde's refusal of `key`'s value, in words) with the setting's
+/// own range where it names its Rust type's.
+pub(super) fn own_range(key: &str, msg: String) -> String {
+    let Some((lo, hi)) = whole_range(key) else {
+        return msg;
+    };
+    let own = format!("a whole number from {lo} to {hi}");
+    [u32::MAX as u64, i64::MAX as u64]
+        .iter()
+        .fold(msg, |m, max| {
+            m.replace(&format!("a whole number from 0 to {max}"), &own)
+        })
+}
+
 fn vec3(v: [f64; 3]) -> DVec3 {
     DVec3::from_array(v)
 }
@@ -172,16 +212,18 @@ pub(super) fn resolve(
     };
     let base = path.parent().unwrap_or(Path::new("."));
 
+    let in_range = |key: &str, v: u32, unit: &str| match whole_range(key) {
+        Some((lo, hi)) if !(lo..=hi).contains(&v) => Err(bad(
+            key,
+            format!("must be from {lo} to {hi}{unit}, got {v}"),
+        )),
+        _ => Ok(()),
+    };
+
     // [image]
     let (w, h) = (f.image.width, f.image.height);
-    for (key, side) in [("image.width", w), ("image.height", h)] {
-        if side == 0 || side > MAX_IMAGE_SIDE {
-            return Err(bad(
-                key,
-                format!("must be from 1 to {MAX_IMAGE_SIDE} pixels, got {side}"),
-            ));
-        }
-    }
+    in_range("image.width", w, " pixels")?;
+    in_range("image.height", h, " pixels")?;
     if (w as u64) * (h as u64) > MAX_IMAGE_PIXELS {
         // Named by the longer side, the one most over its share.
         return Err(bad(
@@ -444,39 +486,19 @@ pub(super) fn resolve(
             format!("must be from {MIN_STEP} to 16 voxels, got {}", r.step),
         ));
     }
-    if r.max_events == 0 || r.max_events > 100_000 {
-        return Err(bad(
-            "render.max_events",
-            format!("must be from 1 to 100000, got {}", r.max_events),
-        ));
-    }
+    in_range("render.max_events", r.max_events, "")?;
     if !(r.tolerance.is_finite() && r.tolerance >= 1e-12 && r.tolerance <= 0.1) {
         return Err(bad(
             "render.tolerance",
             format!("must be from 1e-12 to 0.1 voxels, got {}", r.tolerance),
         ));
     }
-    if r.samples == 0 || r.samples > 64 {
-        return Err(bad(
-            "render.samples",
-            format!("must be from 1 to 64, got {}", r.samples),
-        ));
-    }
+    in_range("render.samples", r.samples, "")?;
     let tile = r
         .tile
         .unwrap_or_else(|| default_tile(r.supersampling.first_pass_rays(r.samples) as u32));
-    if tile == 0 || tile > 256 {
-        return Err(bad(
-            "render.tile",
-            format!("must be from 1 to 256 pixels, got {tile}"),
-        ));
-    }
-    if r.prss_samples == 0 || r.prss_samples > 64 {
-        return Err(bad(
-            "render.prss_samples",
-            format!("must be from 1 to 64, got {}", r.prss_samples),
-        ));
-    }
+    in_range("render.tile", tile, " pixels")?;
+    in_range("render.prss_samples", r.prss_samples, "")?;
     let classify = match r.classify.as_deref() {
         // Precomputed tags are cheap (tens of ms, cached) and make the cell
         // walk an order of magnitude faster than bounding every visited cell

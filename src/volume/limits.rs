@@ -23,8 +23,21 @@ pub const WORKING_BYTES_PER_SAMPLE: u64 = 17;
 /// `0.4`, `1e-9`): a limit of zero bytes would refuse every load. The
 /// error says why, to follow the option or variable's name.
 pub fn parse_bytes(s: &str) -> Result<u64, String> {
-    let bytes = parse_size(s)
-        .ok_or_else(|| format!("'{}' is not a size like 512M, 2GB, 1.5GiB or 1e9", s.trim()))?;
+    let bytes = match parse_size(s) {
+        Some(Size::Bytes(b)) => b,
+        Some(Size::TooLarge) => {
+            return Err(format!(
+                "'{}' is over the largest size, 2^64 - 1 bytes (16 EiB)",
+                s.trim()
+            ));
+        }
+        None => {
+            return Err(format!(
+                "'{}' is not a size like 512M, 2GB, 1.5GiB or 1e9",
+                s.trim()
+            ));
+        }
+    };
     if bytes == 0 {
         return Err(format!(
             "'{}' is under one byte; a limit of zero bytes would refuse every volume",
@@ -34,8 +47,15 @@ pub fn parse_bytes(s: &str) -> Result<u64, String> {
     Ok(bytes)
 }
 
-/// [`parse_bytes`] without its lower bound: the size in whole bytes.
-fn parse_size(s: &str) -> Option<u64> {
+/// A size as written: whole bytes, or more than a `u64` holds.
+enum Size {
+    Bytes(u64),
+    TooLarge,
+}
+
+/// [`parse_bytes`] without its bounds: the size in whole bytes, or `None`
+/// for what is not a size.
+fn parse_size(s: &str) -> Option<Size> {
     let lower = s.trim().to_ascii_lowercase();
     let t = lower
         .strip_suffix("ib")
@@ -52,8 +72,13 @@ fn parse_size(s: &str) -> Option<u64> {
         _ => (t, 1),
     };
     let num = num.trim();
-    if let Ok(n) = num.parse::<u64>() {
-        return n.checked_mul(mul);
+    if !num.is_empty() && num.bytes().all(|b| b.is_ascii_digit()) {
+        return Some(
+            match num.parse::<u64>().ok().and_then(|n| n.checked_mul(mul)) {
+                Some(b) => Size::Bytes(b),
+                None => Size::TooLarge,
+            },
+        );
     }
     // A fraction of a unit (1.5G) or an exponent (1e9): digits, one point,
     // an exponent; no sign, `inf` or `nan`.
@@ -65,7 +90,16 @@ fn parse_size(s: &str) -> Option<u64> {
         return None;
     }
     let x = num.parse::<f64>().ok()? * mul as f64;
-    (x.is_finite() && x >= 0.0 && x < u64::MAX as f64).then(|| x.round() as u64)
+    // No sign, `inf` or `nan` got here: an infinity is a number past f64's
+    // range, and NaN cannot arise.
+    if x.is_nan() || x < 0.0 {
+        return None;
+    }
+    Some(if x < u64::MAX as f64 {
+        Size::Bytes(x.round() as u64)
+    } else {
+        Size::TooLarge
+    })
 }
 
 /// Memory the kernel says is available (`MemAvailable`), if it can be read.
@@ -142,22 +176,15 @@ mod tests {
         assert_eq!(parse_bytes("1.5G").ok(), Some(3 << 29));
         assert_eq!(parse_bytes("0.5K").ok(), Some(512));
         for bad in [
-            "",
-            "lots",
-            "-5G",
-            "-1e3",
-            "NaN",
-            "inf",
-            "infG",
-            "1.5.2G",
-            "99999999999T",
-            "5iB",
-            "1e30",
-            "G",
-            "GB",
+            "", "lots", "-5G", "-1e3", "NaN", "inf", "infG", "1.5.2G", "5iB", "G", "GB",
         ] {
             let e = parse_bytes(bad).unwrap_err();
             assert!(e.contains("is not a size like"), "{bad}: {e}");
+        }
+        // Sizes, but beyond what 64 bits count.
+        for big in ["99999999999T", "1e30", "18446744073709551616", "1e400"] {
+            let e = parse_bytes(big).unwrap_err();
+            assert!(e.contains("over the largest size"), "{big}: {e}");
         }
     }
 

@@ -28,6 +28,9 @@ pub struct VolumeStats {
     /// Iso-values worth trying: midpoints between the dominant histogram modes
     /// (background and materials), where a clean boundary surface usually lies.
     pub suggested_iso: Vec<f64>,
+    /// Whether [`VolumeStats::suggested_iso`] comes from two modes or more;
+    /// otherwise it is the value range's midpoint, a guess.
+    pub iso_from_modes: bool,
 }
 
 impl VolumeStats {
@@ -53,24 +56,30 @@ impl VolumeStats {
             max: hi,
             counts,
         };
-        let suggested_iso = suggest_iso(&histogram);
+        let (suggested_iso, iso_from_modes) = match suggest_iso(&histogram) {
+            Some(iso) => (iso, true),
+            None if hi > lo => (vec![0.5 * (lo + hi)], false),
+            None => (Vec::new(), false),
+        };
         VolumeStats {
             min: lo,
             max: hi,
             mean,
             histogram,
             suggested_iso,
+            iso_from_modes,
         }
     }
 }
 
 /// Finds the histogram's modes (local maxima of the log-count, smoothed) and
 /// returns the midpoints between consecutive strong modes. A surface between
-/// two materials sits halfway between their typical values.
-fn suggest_iso(h: &Histogram) -> Vec<f64> {
+/// two materials sits halfway between their typical values. `None` with
+/// fewer than two strong modes.
+fn suggest_iso(h: &Histogram) -> Option<Vec<f64>> {
     let n = h.counts.len();
     if h.max <= h.min {
-        return Vec::new();
+        return None;
     }
     let log: Vec<f64> = h.counts.iter().map(|&c| ((c + 1) as f64).ln()).collect();
     let smooth: Vec<f64> = (0..n)
@@ -104,14 +113,11 @@ fn suggest_iso(h: &Histogram) -> Vec<f64> {
         })
         .collect();
     modes.dedup();
-    let mut out: Vec<f64> = modes
+    let out: Vec<f64> = modes
         .windows(2)
         .map(|w| 0.5 * (h.bin_center(w[0]) + h.bin_center(w[1])))
         .collect();
-    if out.is_empty() {
-        out.push(0.5 * (h.min + h.max));
-    }
-    out
+    (!out.is_empty()).then_some(out)
 }
 
 #[cfg(test)]
@@ -134,5 +140,17 @@ mod tests {
             "{:?}",
             st.suggested_iso
         );
+        assert!(st.iso_from_modes);
+    }
+
+    /// A ramp has no two materials: the suggestion is the range's midpoint,
+    /// and says so.
+    #[test]
+    fn one_material_gives_the_midpoint_as_a_guess() {
+        let s: Vec<f32> = (0..4096).map(|i| (i % 256) as f32).collect();
+        let v = Volume::new([16, 16, 16], [1.0; 3], SampleType::U8, s).unwrap();
+        let st = v.stats();
+        assert_eq!(st.suggested_iso, vec![127.5]);
+        assert!(!st.iso_from_modes);
     }
 }
