@@ -104,7 +104,6 @@ fn phantom_size(s: &str) -> Result<usize, String> {
     Ok(n)
 }
 
-/// A phantom's error with its setting named as the option that sets it.
 /// `--seed`: any whole number a `u64` holds.
 fn seed(s: &str) -> Result<u64, String> {
     s.trim()
@@ -112,6 +111,7 @@ fn seed(s: &str) -> Result<u64, String> {
         .map_err(|_| format!("expected a whole number from 0 to {}, got '{s}'", u64::MAX))
 }
 
+/// A phantom's error with its setting named as the option that sets it.
 fn option_error(e: PhantomError) -> anyhow::Error {
     match e {
         PhantomError::Setting { key, msg } => {
