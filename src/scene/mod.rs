@@ -572,7 +572,11 @@ checker = 8.0
         let e = Scene::parse("[image\nwidth=3", Path::new("bad.toml"), &[])
             .unwrap_err()
             .to_string();
-        assert!(e.contains("bad.toml") && e.contains("line"), "{e}");
+        // One line: where, what, and the line itself.
+        assert_eq!(
+            e,
+            "bad.toml: line 1, column 7: unclosed table, expected `]` (in: [image)"
+        );
     }
 
     /// A number TOML cannot hold is named by its key only on a `key =`

@@ -210,10 +210,35 @@ fn dotted_key(key: &str) -> String {
 /// A scene file TOML refused: a number out of TOML's range is named by its
 /// key (as a `--set` of the same value is); other syntax errors keep TOML's
 /// message on one line.
+/// A TOML syntax error on one line: where (line and column), what, and the
+/// line it is on (its first 80 characters), instead of the parser's
+/// multi-line drawing, whose caret means nothing once joined into one line.
+fn syntax_message(text: &str, e: &toml::de::Error) -> String {
+    let what = e.message().trim().replace('\n', " ");
+    let Some(start) = e
+        .span()
+        .map(|s| s.start)
+        .filter(|&s| s <= text.len() && text.is_char_boundary(s))
+    else {
+        return e.to_string().trim().replace('\n', " ");
+    };
+    let line_start = text[..start].rfind('\n').map_or(0, |i| i + 1);
+    let line_end = text[start..].find('\n').map_or(text.len(), |i| start + i);
+    let line_no = text[..start].matches('\n').count() + 1;
+    let column = text[line_start..start].chars().count() + 1;
+    let line: String = text[line_start..line_end]
+        .trim_end()
+        .chars()
+        .take(80)
+        .map(|c| if c.is_control() { ' ' } else { c })
+        .collect();
+    format!("line {line_no}, column {column}: {what} (in: {line})")
+}
+
 pub(super) fn syntax_error(text: &str, path: &Path, e: &toml::de::Error) -> SceneError {
     let plain = || SceneError::Syntax {
         path: path.to_path_buf(),
-        msg: e.to_string().trim().replace('\n', " "),
+        msg: syntax_message(text, e),
     };
     let Some(span) = e.span() else {
         return plain();
