@@ -821,6 +821,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("file", "resample: lattice over the memory limit", "resample {tooth} -o up.nrrd --size 2048,2048,2048", &["tooth.nrrd", "2048x2048x2048", "limit"]),
         bad("flag", "phantom --size 0", "phantom sphere --size 0 -o p.nrrd", &["--size", "from 1 to 4096"]),
         bad("flag", "phantom --size beyond 4096", "phantom sphere --size 5000 -o p.nrrd", &["--size", "from 1 to 4096", "5000"]),
+        bad("flag", "phantom over --memory-limit", "phantom sphere --size 512 --memory-limit 100M -o p.nrrd", &["--size", "512x512x512", "100.0 MiB"]),
         bad("flag", "phantom --format unknown", "phantom sphere --format u3 -o p.nrrd", &["--format", "u3"]),
         bad("flag", "phantom --hole with two numbers", "phantom sphere --hole 1,2 -o p.nrrd", &["--hole"]),
         bad("flag", "phantom --noise beyond f32", "phantom sphere --size 8 --noise 1e39 --format f32 -o p.nrrd", &["phantom", "f32"]),

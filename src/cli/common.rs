@@ -46,6 +46,19 @@ fn byte_offset(s: &str) -> Result<u64, String> {
     })
 }
 
+/// `--memory-limit` for a command whose limit checks read the variable
+/// (every check of a scene, its volume and its images, a phantom's): the
+/// flag, checked, sets `SNELL_MEMORY_LIMIT` for them all. Called at
+/// start-up, before the process starts any other thread.
+pub fn set_memory_limit(arg: Option<&str>) -> anyhow::Result<()> {
+    if let Some(s) = arg {
+        memory_limit(Some(s))?;
+        // SAFETY: no other thread runs yet to read the environment.
+        unsafe { std::env::set_var("SNELL_MEMORY_LIMIT", s) };
+    }
+    Ok(())
+}
+
 /// `--memory-limit`, or the default limit.
 pub fn memory_limit(arg: Option<&str>) -> anyhow::Result<u64> {
     Ok(match arg {

@@ -73,13 +73,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    if let Some(s) = &a.memory_limit {
-        super::common::memory_limit(Some(s))?;
-        // Every limit check of the scene, its volume and its image reads the
-        // variable, so the flag sets it for them all.
-        // SAFETY: at start-up, before this process starts any other thread.
-        unsafe { std::env::set_var("SNELL_MEMORY_LIMIT", s) };
-    }
+    super::common::set_memory_limit(a.memory_limit.as_deref())?;
     let scene = load_scene(&a.scene, &a.set)?;
     let outputs = Outputs::of(&a)?;
     check_distinct(
