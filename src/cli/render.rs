@@ -112,18 +112,23 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 
     let mut trace = a.trace.as_ref().map(|_| render::Trace::new());
     let prep_start = Instant::now();
-    let prep = match &a.cache {
-        Some(dir) => {
-            let mut cache = snell::prepare::Cache::with_dir(dir)
-                .with_context(|| format!("cache directory {}", dir.display()))?;
-            let prep = pool.install(|| cache.prepare(&scene, &LoadOptions::default()))?;
-            for w in &cache.warnings {
-                eprintln!("warning: {w}");
+    let (prep, cache_warnings) = with_spinner(|| -> anyhow::Result<_> {
+        Ok(match &a.cache {
+            Some(dir) => {
+                let mut cache = snell::prepare::Cache::with_dir(dir)
+                    .with_context(|| format!("cache directory {}", dir.display()))?;
+                let prep = pool.install(|| cache.prepare(&scene, &LoadOptions::default()))?;
+                (prep, cache.warnings)
             }
-            prep
-        }
-        None => pool.install(|| Prepared::for_scene(&scene, &LoadOptions::default()))?,
-    };
+            None => (
+                pool.install(|| Prepared::for_scene(&scene, &LoadOptions::default()))?,
+                Vec::new(),
+            ),
+        })
+    })?;
+    for w in &cache_warnings {
+        eprintln!("warning: {w}");
+    }
     if let Some(t) = &mut trace {
         t.prepare(prep_start, prep_start.elapsed(), &prep.times);
     }
@@ -176,7 +181,12 @@ impl Renderer<'_> {
                 let _ = finished.send(());
                 frame
             });
-            progress_bar(&done, self.tiles, &worker, &ended);
+            watch(
+                &worker,
+                &ended,
+                |_| tiles_bar(self.tiles),
+                |b| b.set_position(done.load(Ordering::Relaxed) as u64),
+            );
             worker.join().expect("render thread panicked")
         })
     }
@@ -513,42 +523,74 @@ impl FramePattern {
     }
 }
 
-/// Shows a bar on stderr once a render has run for a second, updated every
-/// 25 ms; returns as soon as the worker sends on `ended` (or has ended
-/// without sending, by a panic). It slept 25 ms between looks at the
-/// worker, which kept every `snell render` waiting for the tick after its
-/// render had ended (the glass sphere's whole process 68 → 53 ms, medians
-/// of 15).
-fn progress_bar<T>(
-    done: &AtomicUsize,
-    total: usize,
+/// Waits for `worker`, which sends on `ended` when it is done; once it has
+/// run for a second, shows `bar(time so far)` on stderr (on a terminal: indicatif
+/// draws nothing elsewhere) and `tick`s it every 25 ms. Returns as soon as
+/// the worker sends (or has ended without sending, by a panic). It slept
+/// 25 ms between looks at the worker, which kept every `snell render`
+/// waiting for the tick after its render had ended (the glass sphere's
+/// whole process 68 → 53 ms, medians of 15).
+fn watch<T>(
     worker: &std::thread::ScopedJoinHandle<T>,
     ended: &mpsc::Receiver<()>,
+    bar: impl Fn(Duration) -> indicatif::ProgressBar,
+    tick: impl Fn(&indicatif::ProgressBar),
 ) {
     let start = Instant::now();
-    let mut bar: Option<indicatif::ProgressBar> = None;
+    let mut shown: Option<indicatif::ProgressBar> = None;
     while !worker.is_finished() {
         if ended.recv_timeout(Duration::from_millis(25)).is_ok() {
             break;
         }
-        if bar.is_none() && start.elapsed() > Duration::from_secs(1) {
-            let b = indicatif::ProgressBar::new(total as u64);
-            b.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "rendering [{bar:40}] {pos}/{len} tiles, {eta} left",
-                )
-                .expect("valid template")
-                .progress_chars("=> "),
-            );
-            bar = Some(b);
+        if shown.is_none() && start.elapsed() > Duration::from_secs(1) {
+            shown = Some(bar(start.elapsed()));
         }
-        if let Some(b) = &bar {
-            b.set_position(done.load(Ordering::Relaxed) as u64);
+        if let Some(b) = &shown {
+            tick(b);
         }
     }
-    if let Some(b) = bar {
+    if let Some(b) = shown {
         b.finish_and_clear();
     }
+}
+
+/// The render's bar: tiles done of `total`, and the time left.
+fn tiles_bar(total: usize) -> indicatif::ProgressBar {
+    let b = indicatif::ProgressBar::new(total as u64);
+    b.set_style(
+        indicatif::ProgressStyle::with_template(
+            "rendering [{bar:40}] {pos}/{len} tiles, {eta} left",
+        )
+        .expect("valid template")
+        .progress_chars("=> "),
+    );
+    b
+}
+
+/// Runs `f` (the volume's load, prefilter, classification and octree) on
+/// a worker thread with a spinner once it has taken a second: a 1024³ scan
+/// spends half a minute here before its first tile.
+fn with_spinner<T: Send>(f: impl FnOnce() -> T + Send) -> T {
+    let (finished, ended) = mpsc::channel::<()>();
+    std::thread::scope(|s| {
+        let worker = s.spawn(|| {
+            let out = f();
+            let _ = finished.send(());
+            out
+        });
+        let spinner = |so_far| {
+            let b = indicatif::ProgressBar::new_spinner().with_elapsed(so_far);
+            b.set_style(
+                indicatif::ProgressStyle::with_template(
+                    "{spinner} preparing the volume (load, prefilter, cell tags), {elapsed}",
+                )
+                .expect("valid template"),
+            );
+            b
+        };
+        watch(&worker, &ended, spinner, |b| b.tick());
+        worker.join().expect("preparation thread panicked")
+    })
 }
 
 /// `--orbit`: a frame count from 1 to [`MAX_FRAMES`](snell::scene::orbit::MAX_FRAMES).
