@@ -121,14 +121,17 @@ fn info_warns_of_data_after_the_samples() {
 fn sample_prints_csv_in_input_order() {
     let t = Tmp::new("sample");
     let pts = t.write("p.txt", b"# grid points\n10,20,30\n\n10.5 20.25 30.75\n");
-    let o = run(&[
-        "sample",
-        data("engine.nrrd").to_str().unwrap(),
-        "--filter",
-        "bspline3",
-        "--points",
-        pts.to_str().unwrap(),
-    ]);
+    let sample = |points: &Path| {
+        run(&[
+            "sample",
+            data("engine.nrrd").to_str().unwrap(),
+            "--filter",
+            "bspline3",
+            "--points",
+            points.to_str().unwrap(),
+        ])
+    };
+    let o = sample(&pts);
     assert!(o.status.success(), "{}", stderr(&o));
     let out = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = out.lines().collect();
@@ -139,21 +142,8 @@ fn sample_prints_csv_in_input_order() {
     assert_eq!(lines[2].split(',').count(), 7);
     assert!(stderr(&o).is_empty(), "{}", stderr(&o));
     // Points off the grid are evaluated (mirror boundary) and counted.
-    let off = t.write(
-        "off.txt",
-        b"-1,20,30
-10,20,30
-10,20,1e6
-",
-    );
-    let o = run(&[
-        "sample",
-        data("engine.nrrd").to_str().unwrap(),
-        "--filter",
-        "bspline3",
-        "--points",
-        off.to_str().unwrap(),
-    ]);
+    let off = t.write("off.txt", b"-1,20,30\n10,20,30\n10,20,1e6\n");
+    let o = sample(&off);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 4);
     let err = stderr(&o);

@@ -1002,15 +1002,26 @@ fn map_extent(g: &Grid, map: PrssMap) -> f64 {
     (hi[0] - lo[0]).max(hi[1] - lo[1])
 }
 
+/// With the `trace` fallback: the map bends too fast at pixel `(x, y)` for
+/// its neighbours to interpolate it, so it is re-traced (and counted).
+fn retrace_for_curvature(
+    c: &Ctx,
+    (x, y): (i64, i64),
+    (centre, ev): ([f64; 2], f32),
+    st: &mut PostStats,
+) -> bool {
+    let curved = c.s.fallback == PrssFallback::Trace
+        && c.map
+            .bends(x, y, centre, ev, c.s.curvature * feature_size(c.backdrop));
+    st.pixels_curved += curved as u64;
+    curved
+}
+
 /// PRSS colour of one pixel, or `None` to re-trace it.
 fn prss_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
     let (centre, ev) = c.map.at(x, y)?;
     let s = c.s;
-    if s.fallback == PrssFallback::Trace
-        && c.map
-            .bends(x, y, centre, ev, s.curvature * feature_size(c.backdrop))
-    {
-        st.pixels_curved += 1;
+    if retrace_for_curvature(c, (x, y), (centre, ev), st) {
         return None;
     }
     let r = if s.map == PrssMap::Bicubic { 2 } else { 1 };
@@ -1141,11 +1152,7 @@ fn one_square_colours(
 fn footprint_pixel(c: &Ctx, x: i64, y: i64, st: &mut PostStats) -> Option<[f32; 3]> {
     let (centre, ev) = c.map.at(x, y)?;
     let s = c.s;
-    if s.fallback == PrssFallback::Trace
-        && c.map
-            .bends(x, y, centre, ev, s.curvature * feature_size(c.backdrop))
-    {
-        st.pixels_curved += 1;
+    if retrace_for_curvature(c, (x, y), (centre, ev), st) {
         return None;
     }
     let ring = Ring::new(&c.map, x, y, Some(ev));
