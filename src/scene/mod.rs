@@ -34,11 +34,10 @@ pub(crate) use resolve::setting_name;
 pub use settings::{
     FootprintFilter, PrssFallback, PrssMap, RenderSettings, Storage, Supersampling, Traversal,
 };
-pub(crate) use words::plain_serde_message;
 
 use file::SceneFile;
 use overrides::{blame_override, culprit_override, written_keys};
-use resolve::{own_range, phantom_spec, resolve};
+use resolve::{phantom_spec, resolve, setting_message};
 use words::syntax_error;
 
 use crate::classify::Method;
@@ -212,16 +211,13 @@ impl Scene {
             .map_err(|e| {
                 let key = e.path().to_string();
                 let key = if key == "." { "scene".into() } else { key };
-                let msg = own_range(&key, plain_serde_message(e.into_inner().message()));
+                let msg = setting_message(&key, e.into_inner().message());
                 key_error(key, msg)
             })
             .and_then(|file: SceneFile| {
                 let phantom = match &file.volume.phantom {
                     None => None,
-                    Some(v) => Some(phantom_spec(v.clone()).map_err(|(k, m)| {
-                        let m = own_range(&k, m);
-                        key_error(k, m)
-                    })?),
+                    Some(v) => Some(phantom_spec(v.clone()).map_err(|(k, m)| key_error(k, m))?),
                 };
                 resolve(file, phantom, path, &written)
             });

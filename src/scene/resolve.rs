@@ -44,18 +44,10 @@ fn whole_range(key: &str) -> Option<(u32, u32)> {
         .map(|&(_, lo, hi)| (lo, hi))
 }
 
-/// `msg` (serde's refusal of `key`'s value, in words) with the setting's
-/// own range where it names its Rust type's.
-pub(super) fn own_range(key: &str, msg: String) -> String {
-    let Some((lo, hi)) = whole_range(key) else {
-        return msg;
-    };
-    let own = format!("a whole number from {lo} to {hi}");
-    [u32::MAX as u64, i64::MAX as u64]
-        .iter()
-        .fold(msg, |m, max| {
-            m.replace(&format!("a whole number from 0 to {max}"), &own)
-        })
+/// serde's refusal of `key`'s value in plain words, with the setting's own
+/// range where it has one.
+pub(super) fn setting_message(key: &str, serde_msg: &str) -> String {
+    plain_serde_message(serde_msg, whole_range(key))
 }
 
 fn vec3(v: [f64; 3]) -> DVec3 {
@@ -83,7 +75,8 @@ pub(super) fn phantom_spec(v: toml::Value) -> Result<PhantomSpec, (String, Strin
             } else {
                 format!("volume.phantom.{key}")
             };
-            (key, plain_serde_message(e.into_inner().message()))
+            let msg = setting_message(&key, e.into_inner().message());
+            (key, msg)
         })
     }
     match kind.as_ref().and_then(|k| k.as_str()) {

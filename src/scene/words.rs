@@ -20,12 +20,17 @@ pub(super) fn plain_value(v: &toml::Value) -> String {
 /// f64` becomes `expected a number, got the text "1.5"`, Rust type names
 /// become ranges (`u32`: a whole number from 0 to 4294967295; TOML's
 /// integers are `i64`, so `u64` and `usize` reach 9223372036854775807) and
-/// the struct names the settings they hold. `msg` is the message alone
-/// ([`toml::de::Error::message`]): the caller names the key.
-pub(crate) fn plain_serde_message(msg: &str) -> String {
+/// the struct names the settings they hold; a setting with a range of its
+/// own gives it as `whole`, which an unsigned type's range gives way to.
+/// `msg` is the message alone ([`toml::de::Error::message`]): the caller
+/// names the key.
+pub(crate) fn plain_serde_message(msg: &str, whole: Option<(u32, u32)>) -> String {
     let msg = msg.trim().replace('\n', " ");
     let expected = |e: &str| -> String {
         let e = e.trim();
+        if let ("u8" | "u16" | "u32" | "u64" | "usize", Some((lo, hi))) = (e, whole) {
+            return format!("a whole number from {lo} to {hi}");
+        }
         match e {
             "f64" | "f32" => "a number".into(),
             "u8" => "a whole number from 0 to 255".into(),
