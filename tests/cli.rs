@@ -1429,6 +1429,67 @@ fn orbit_turns_the_view_about_the_volume() {
     }
 }
 
+/// Off a terminal (a batch job's log) a long render writes a plain progress
+/// line every `SNELL_PROGRESS_SECONDS`; `-q`, `0` or a short render write
+/// none, and a value that is not seconds is a warning, not a failure.
+#[test]
+fn logs_get_progress_lines_instead_of_a_bar() {
+    let t = Tmp::new("progress");
+    let sphere = root().join(SPHERE);
+    let sphere = sphere.to_str().unwrap();
+    let png = t.path("a.png");
+    let render = |every: &str, size: &str, quiet: bool| {
+        let mut c = bin();
+        c.env("SNELL_PROGRESS_SECONDS", every).args([
+            "render",
+            sphere,
+            "-o",
+            png.to_str().unwrap(),
+            "--set",
+            &format!("image.width={size}"),
+            "--set",
+            &format!("image.height={size}"),
+        ]);
+        if quiet {
+            c.arg("-q");
+        }
+        let o = c.output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+        stderr(&o)
+    };
+    let lines = |err: &str| {
+        err.lines()
+            .filter(|l| l.starts_with("rendering: "))
+            .map(str::to_string)
+            .collect::<Vec<_>>()
+    };
+    // 2048² takes some 16 times the 512² frame: many 50 ms intervals.
+    let err = render("0.05", "2048", false);
+    let logged = lines(&err);
+    assert!(!logged.is_empty(), "{err}");
+    for l in &logged {
+        assert!(
+            l.contains(" of 4096 tiles (") && l.contains(" so far"),
+            "{l}"
+        );
+    }
+    assert!(err.contains("per ray:"), "the stats table follows: {err}");
+    assert!(lines(&render("0.05", "2048", true)).is_empty(), "-q");
+    assert!(
+        lines(&render("0", "1024", false)).is_empty(),
+        "0 turns lines off"
+    );
+    assert!(
+        lines(&render("30", "64", false)).is_empty(),
+        "a short render"
+    );
+    let err = render("soon", "64", false);
+    assert!(
+        err.contains("warning: SNELL_PROGRESS_SECONDS: expected seconds"),
+        "{err}"
+    );
+}
+
 /// A frame rendered as three `--region` parts and joined by `snell merge`
 /// equals the whole-frame render bit for bit — hit positions and colour —
 /// with each post stage that reads neighbouring pixels (PRSS with both

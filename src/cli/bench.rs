@@ -256,13 +256,9 @@ impl Bar {
 impl Observer for Bar {
     fn begin(&mut self, total: usize) {
         let b = indicatif::ProgressBar::new(total as u64);
-        b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "[{bar:30}] {pos}/{len} runs, {elapsed} elapsed, ETA {eta}  {wide_msg}",
-            )
-            .expect("valid template")
-            .progress_chars("=> "),
-        );
+        b.set_style(super::progress::style(
+            "[{bar:30}] {pos}/{len} runs, {elapsed} elapsed, ETA {eta}  {wide_msg}",
+        ));
         b.enable_steady_tick(Duration::from_millis(500));
         self.bar = Some(b);
     }

@@ -8,6 +8,7 @@ mod export_pov;
 mod info;
 mod merge;
 mod phantom;
+mod progress;
 mod reference;
 mod render;
 mod resample;

@@ -8,9 +8,10 @@ use clap::{Args as ClapArgs, Subcommand};
 use snell::phantom::{
     Hole, MAX_PHANTOM_SIZE, MarschnerLobbSpec, PhantomError, PhantomFormat, SphereSpec,
 };
-use snell::volume;
+use snell::volume::{self, Volume};
 
 use super::common::{check_format, check_output, set_memory_limit, triple};
+use super::progress::{self, Step};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -127,6 +128,11 @@ fn option_error(e: PhantomError) -> anyhow::Error {
     }
 }
 
+/// Builds a phantom, its progress shown (a 1024³ one takes a while).
+fn build(spec: impl FnOnce() -> Result<Volume, PhantomError> + Send) -> anyhow::Result<Volume> {
+    progress::watch(&Step::named("building the phantom"), false, spec).map_err(option_error)
+}
+
 fn format(s: &str) -> anyhow::Result<PhantomFormat> {
     PhantomFormat::parse(s).with_context(|| format!("--format: expected f32, u8 or u16, got '{s}'"))
 }
@@ -168,7 +174,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             check_output(&s.out.output)?;
             check_format(&s.out.output, "-o", &volume::WRITTEN_FORMATS)?;
             set_memory_limit(s.out.memory_limit.as_deref())?;
-            (spec.build().map_err(option_error)?, s.out)
+            (build(|| spec.build())?, s.out)
         }
         Kind::MarschnerLobb(m) => {
             let spec = MarschnerLobbSpec {
@@ -182,10 +188,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             check_output(&m.out.output)?;
             check_format(&m.out.output, "-o", &volume::WRITTEN_FORMATS)?;
             set_memory_limit(m.out.memory_limit.as_deref())?;
-            (spec.build().map_err(option_error)?, m.out)
+            (build(|| spec.build())?, m.out)
         }
     };
-    volume::write(&out.output, &vol, out.gzip)?;
+    let writing = Step::named(format!("writing {}", out.output.display()));
+    progress::watch(&writing, false, || {
+        volume::write(&out.output, &vol, out.gzip)
+    })?;
     let d = vol.dims();
     eprintln!(
         "wrote {} ({}x{}x{} {})",

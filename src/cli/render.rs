@@ -2,9 +2,8 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::mpsc;
-use std::time::{Duration, Instant};
+use std::sync::atomic::AtomicUsize;
+use std::time::Instant;
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
@@ -14,6 +13,7 @@ use snell::scene::{Orbit, Scene};
 use snell::volume::LoadOptions;
 
 use super::common::{check_distinct, check_format, check_output, load_scene};
+use super::progress::{self, Count, Step};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -67,7 +67,8 @@ pub struct Args {
     /// printed, then the median (steady state: structures cached).
     #[arg(long, value_name = "N", allow_negative_numbers = true, value_parser = frame_count)]
     pub orbit: Option<u32>,
-    /// Do not print the stats table.
+    /// Print no stats table and no progress (the bar on a terminal, the
+    /// lines every SNELL_PROGRESS_SECONDS, default 30, in a log).
     #[arg(short, long)]
     pub quiet: bool,
 }
@@ -112,7 +113,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
 
     let mut trace = a.trace.as_ref().map(|_| render::Trace::new());
     let prep_start = Instant::now();
-    let (prep, cache_warnings) = with_spinner(|| -> anyhow::Result<_> {
+    // A 1024³ scan spends half a minute here before its first tile.
+    let preparing = Step::named("preparing the volume (load, prefilter, cell tags)");
+    let (prep, cache_warnings) = progress::watch(&preparing, a.quiet, || -> anyhow::Result<_> {
         Ok(match &a.cache {
             Some(dir) => {
                 let mut cache = snell::prepare::Cache::with_dir(dir)
@@ -148,6 +151,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         prep: &prep,
         window,
         tiles,
+        quiet: a.quiet,
     };
     match a.orbit {
         None => render_one(&a, &scene, &renderer, &outputs, trace),
@@ -162,32 +166,28 @@ struct Renderer<'a> {
     prep: &'a Prepared,
     window: Option<render::tile::Tile>,
     tiles: usize,
+    quiet: bool,
 }
 
 impl Renderer<'_> {
     /// One frame of `scene`, in the pool (so --threads sets its tile
-    /// workers), with a progress bar once it has run for a second.
+    /// workers), its progress shown ([`progress::watch`]).
     fn frame(&self, scene: &Scene, trace: Option<&mut render::Trace>) -> render::Frame {
         let done = AtomicUsize::new(0);
-        let (finished, ended) = mpsc::channel::<()>();
-        std::thread::scope(|s| {
-            let worker = s.spawn(|| {
-                let frame = self.pool.install(|| match (self.window, trace) {
-                    (Some(w), t) => render::render_window(scene, self.prep, w, Some(&done), t),
-                    (None, Some(t)) => render::render_traced(scene, self.prep, Some(&done), t),
-                    (None, None) => render::render(scene, self.prep, Some(&done)),
-                });
-                // Wakes the progress loop now rather than at its next tick.
-                let _ = finished.send(());
-                frame
-            });
-            watch(
-                &worker,
-                &ended,
-                |_| tiles_bar(self.tiles),
-                |b| b.set_position(done.load(Ordering::Relaxed) as u64),
-            );
-            worker.join().expect("render thread panicked")
+        let step = Step {
+            what: "rendering".into(),
+            count: Some(Count {
+                done: &done,
+                total: self.tiles,
+                unit: "tiles",
+            }),
+        };
+        progress::watch(&step, self.quiet, || {
+            self.pool.install(|| match (self.window, trace) {
+                (Some(w), t) => render::render_window(scene, self.prep, w, Some(&done), t),
+                (None, Some(t)) => render::render_traced(scene, self.prep, Some(&done), t),
+                (None, None) => render::render(scene, self.prep, Some(&done)),
+            })
         })
     }
 }
@@ -521,76 +521,6 @@ impl FramePattern {
             w = self.width
         ))
     }
-}
-
-/// Waits for `worker`, which sends on `ended` when it is done; once it has
-/// run for a second, shows `bar(time so far)` on stderr (on a terminal: indicatif
-/// draws nothing elsewhere) and `tick`s it every 25 ms. Returns as soon as
-/// the worker sends (or has ended without sending, by a panic). It slept
-/// 25 ms between looks at the worker, which kept every `snell render`
-/// waiting for the tick after its render had ended (the glass sphere's
-/// whole process 68 → 53 ms, medians of 15).
-fn watch<T>(
-    worker: &std::thread::ScopedJoinHandle<T>,
-    ended: &mpsc::Receiver<()>,
-    bar: impl Fn(Duration) -> indicatif::ProgressBar,
-    tick: impl Fn(&indicatif::ProgressBar),
-) {
-    let start = Instant::now();
-    let mut shown: Option<indicatif::ProgressBar> = None;
-    while !worker.is_finished() {
-        if ended.recv_timeout(Duration::from_millis(25)).is_ok() {
-            break;
-        }
-        if shown.is_none() && start.elapsed() > Duration::from_secs(1) {
-            shown = Some(bar(start.elapsed()));
-        }
-        if let Some(b) = &shown {
-            tick(b);
-        }
-    }
-    if let Some(b) = shown {
-        b.finish_and_clear();
-    }
-}
-
-/// The render's bar: tiles done of `total`, and the time left.
-fn tiles_bar(total: usize) -> indicatif::ProgressBar {
-    let b = indicatif::ProgressBar::new(total as u64);
-    b.set_style(
-        indicatif::ProgressStyle::with_template(
-            "rendering [{bar:40}] {pos}/{len} tiles, {eta} left",
-        )
-        .expect("valid template")
-        .progress_chars("=> "),
-    );
-    b
-}
-
-/// Runs `f` (the volume's load, prefilter, classification and octree) on
-/// a worker thread with a spinner once it has taken a second: a 1024³ scan
-/// spends half a minute here before its first tile.
-fn with_spinner<T: Send>(f: impl FnOnce() -> T + Send) -> T {
-    let (finished, ended) = mpsc::channel::<()>();
-    std::thread::scope(|s| {
-        let worker = s.spawn(|| {
-            let out = f();
-            let _ = finished.send(());
-            out
-        });
-        let spinner = |so_far| {
-            let b = indicatif::ProgressBar::new_spinner().with_elapsed(so_far);
-            b.set_style(
-                indicatif::ProgressStyle::with_template(
-                    "{spinner} preparing the volume (load, prefilter, cell tags), {elapsed}",
-                )
-                .expect("valid template"),
-            );
-            b
-        };
-        watch(&worker, &ended, spinner, |b| b.tick());
-        worker.join().expect("preparation thread panicked")
-    })
 }
 
 /// `--orbit`: a frame count from 1 to [`MAX_FRAMES`](snell::scene::orbit::MAX_FRAMES).

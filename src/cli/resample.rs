@@ -11,6 +11,7 @@ use snell::filter::resample::resample;
 use snell::volume::{self, SampleType};
 
 use super::common::{VolumeArgs, check_distinct, check_format, check_output, human_mib, triple};
+use super::progress::{self, Step};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -55,17 +56,25 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     check_format(&a.output, "-o", &volume::WRITTEN_FORMATS)?;
     check_distinct(&[&a.output], &[&a.volume])?;
     let opts = a.vol.load_options(&a.volume)?;
-    let vol = a.vol.load_with(&a.volume, &opts)?;
+    let reading = Step::named(format!("reading {}", a.volume.display()));
+    let vol = progress::watch(&reading, false, || a.vol.load_with(&a.volume, &opts))?;
     let ty = ty.unwrap_or(match vol.native_type() {
         SampleType::F64 => SampleType::F32,
         t => t,
     });
     let start = Instant::now();
-    let out = resample(&vol, kind, size, ty, opts.memory_limit)
-        .with_context(|| a.volume.display().to_string())?;
+    let resampling = Step::named(format!(
+        "resampling to {}x{}x{} with {kind}",
+        size[0], size[1], size[2]
+    ));
+    let out = progress::watch(&resampling, false, || {
+        resample(&vol, kind, size, ty, opts.memory_limit)
+    })
+    .with_context(|| a.volume.display().to_string())?;
     let took = start.elapsed().as_secs_f64();
     drop(vol);
-    volume::write(&a.output, &out, a.gzip)?;
+    let writing = Step::named(format!("writing {}", a.output.display()));
+    progress::watch(&writing, false, || volume::write(&a.output, &out, a.gzip))?;
     let d = out.dims();
     let s = out.spacing();
     let peak = snell::bench::machine::peak_rss_mib()

@@ -1,0 +1,271 @@
+//! Progress of a long step on stderr, where the user watching it is.
+//!
+//! On a terminal an indicatif bar (a spinner when the amount of work is not
+//! known) appears once the step has taken a second and is cleared when it
+//! ends. Elsewhere (stderr a file or a pipe, as in a batch job's log) a bar
+//! draws nothing, and an offline render of a large scan would log nothing for
+//! minutes; there a plain line is written every `SNELL_PROGRESS_SECONDS`
+//! seconds instead (default 30, `0` for none), so a short step logs nothing.
+
+use std::io::IsTerminal;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::{OnceLock, mpsc};
+use std::time::{Duration, Instant};
+
+/// How long a step runs before its bar or spinner appears on a terminal.
+const BAR_AFTER: Duration = Duration::from_secs(1);
+
+/// How often the watcher looks at the step: the bar's refresh, and how late
+/// a log line can be.
+const LOOK_EVERY: Duration = Duration::from_millis(25);
+
+/// The log lines' interval when `SNELL_PROGRESS_SECONDS` is not set.
+const DEFAULT_LOG_EVERY: Duration = Duration::from_secs(30);
+
+/// A step to watch: what it does and, when known, how much of it is done.
+pub struct Step<'a> {
+    /// What the step does, as the progress says it ("rendering").
+    pub what: String,
+    /// Units done so far of a known total, counted by the step as it goes.
+    pub count: Option<Count<'a>>,
+}
+
+/// Work units done of a total (the render's tiles).
+pub struct Count<'a> {
+    pub done: &'a AtomicUsize,
+    pub total: usize,
+    /// The units' name, plural ("tiles").
+    pub unit: &'static str,
+}
+
+impl Step<'_> {
+    /// A step whose amount of work is not known (a spinner on a terminal).
+    pub fn named(what: impl Into<String>) -> Step<'static> {
+        Step {
+            what: what.into(),
+            count: None,
+        }
+    }
+
+    /// The log line at `elapsed` into the step.
+    fn line(&self, elapsed: Duration) -> String {
+        let so_far = span(elapsed);
+        match &self.count {
+            None => format!("{}: {so_far} so far", self.what),
+            Some(c) => {
+                let done = c.done.load(Ordering::Relaxed).min(c.total);
+                let left = match done {
+                    0 => String::new(),
+                    d => {
+                        let rest = elapsed.mul_f64((c.total - d) as f64 / d as f64);
+                        format!(", about {} left", span(rest))
+                    }
+                };
+                format!(
+                    "{}: {done} of {} {} ({}%), {so_far} so far{left}",
+                    self.what,
+                    c.total,
+                    c.unit,
+                    done * 100 / c.total.max(1)
+                )
+            }
+        }
+    }
+
+    /// The terminal's bar (or spinner), started `so_far` into the step.
+    fn bar(&self, so_far: Duration) -> indicatif::ProgressBar {
+        match &self.count {
+            None => {
+                let b = indicatif::ProgressBar::new_spinner().with_elapsed(so_far);
+                b.set_style(style(&format!("{{spinner}} {}, {{elapsed}}", self.what)));
+                b
+            }
+            Some(c) => {
+                let b = indicatif::ProgressBar::new(c.total as u64).with_elapsed(so_far);
+                b.set_style(style(&format!(
+                    "{} [{{bar:40}}] {{pos}}/{{len}} {}, {{eta}} left",
+                    self.what, c.unit
+                )));
+                b
+            }
+        }
+    }
+
+    /// Brings the terminal's bar up to date.
+    fn tick(&self, b: &indicatif::ProgressBar) {
+        match &self.count {
+            None => b.tick(),
+            Some(c) => b.set_position(c.done.load(Ordering::Relaxed) as u64),
+        }
+    }
+}
+
+/// The progress style of every snell bar: `template` with `=> ` bars.
+pub fn style(template: &str) -> indicatif::ProgressStyle {
+    indicatif::ProgressStyle::with_template(template)
+        .expect("valid template")
+        .progress_chars("=> ")
+}
+
+/// Runs `f` on a worker thread while this one shows `step`'s progress (none
+/// when `quiet`). Returns `f`'s value as soon as it ends.
+pub fn watch<T: Send>(step: &Step, quiet: bool, f: impl FnOnce() -> T + Send) -> T {
+    let show = if quiet {
+        Show::Nothing
+    } else if std::io::stderr().is_terminal() {
+        Show::Bar
+    } else {
+        match log_every() {
+            Some(every) => Show::Log(every),
+            None => Show::Nothing,
+        }
+    };
+    if show == Show::Nothing {
+        return f();
+    }
+    let (finished, ended) = mpsc::channel::<()>();
+    std::thread::scope(|s| {
+        let worker = s.spawn(|| {
+            let out = f();
+            // Wakes the watcher now rather than at its next look.
+            let _ = finished.send(());
+            out
+        });
+        let start = Instant::now();
+        let mut bar: Option<indicatif::ProgressBar> = None;
+        let mut logged = 0u32;
+        // A panicking worker ends without sending: `is_finished` ends the loop.
+        while !worker.is_finished() {
+            if ended.recv_timeout(LOOK_EVERY).is_ok() {
+                break;
+            }
+            let elapsed = start.elapsed();
+            match show {
+                Show::Bar => {
+                    if bar.is_none() && elapsed > BAR_AFTER {
+                        bar = Some(step.bar(elapsed));
+                    }
+                    if let Some(b) = &bar {
+                        step.tick(b);
+                    }
+                }
+                Show::Log(every) => {
+                    if elapsed >= every * (logged + 1) {
+                        logged = (elapsed.as_secs_f64() / every.as_secs_f64()) as u32;
+                        eprintln!("{}", step.line(elapsed));
+                    }
+                }
+                Show::Nothing => {}
+            }
+        }
+        if let Some(b) = bar {
+            b.finish_and_clear();
+        }
+        worker.join().expect("worker thread panicked")
+    })
+}
+
+#[derive(Clone, Copy, PartialEq, Debug)]
+enum Show {
+    Nothing,
+    Bar,
+    Log(Duration),
+}
+
+/// The log lines' interval: `SNELL_PROGRESS_SECONDS` (seconds, fractions
+/// allowed; `0` for no lines), else 30 s. A value that is not a number of
+/// seconds is ignored with a warning, as `SNELL_MEMORY_LIMIT`'s is.
+fn log_every() -> Option<Duration> {
+    static EVERY: OnceLock<Option<Duration>> = OnceLock::new();
+    *EVERY.get_or_init(|| match std::env::var("SNELL_PROGRESS_SECONDS") {
+        Err(_) => Some(DEFAULT_LOG_EVERY),
+        Ok(s) => match parse_interval(&s) {
+            Ok(every) => every,
+            Err(why) => {
+                eprintln!("warning: SNELL_PROGRESS_SECONDS: {why}; ignored");
+                Some(DEFAULT_LOG_EVERY)
+            }
+        },
+    })
+}
+
+/// Seconds from 0 to a day; `None` for 0 (no lines).
+fn parse_interval(s: &str) -> Result<Option<Duration>, String> {
+    const DAY: f64 = 86_400.0;
+    match s.trim().parse::<f64>() {
+        Ok(0.0) => Ok(None),
+        Ok(x) if x > 0.0 && x <= DAY => Ok(Some(Duration::from_secs_f64(x))),
+        _ => Err(format!(
+            "expected seconds from 0 (no progress lines) to {DAY}, got '{s}'"
+        )),
+    }
+}
+
+/// A duration as a log reads it: `42 s`, `3 min 05 s`, `2 h 07 min`.
+fn span(d: Duration) -> String {
+    let s = d.as_secs();
+    match s {
+        0..60 => format!("{s} s"),
+        60..3600 => format!("{} min {:02} s", s / 60, s % 60),
+        _ => format!("{} h {:02} min", s / 3600, s % 3600 / 60),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn spans_read_as_a_log_does() {
+        assert_eq!(span(Duration::from_millis(999)), "0 s");
+        assert_eq!(span(Duration::from_secs(59)), "59 s");
+        assert_eq!(span(Duration::from_secs(185)), "3 min 05 s");
+        assert_eq!(
+            span(Duration::from_secs(2 * 3600 + 7 * 60 + 59)),
+            "2 h 07 min"
+        );
+    }
+
+    #[test]
+    fn log_lines_say_the_share_done_and_the_time_left() {
+        let done = AtomicUsize::new(0);
+        let step = Step {
+            what: "rendering".into(),
+            count: Some(Count {
+                done: &done,
+                total: 400,
+                unit: "tiles",
+            }),
+        };
+        assert_eq!(
+            step.line(Duration::from_secs(30)),
+            "rendering: 0 of 400 tiles (0%), 30 s so far"
+        );
+        done.store(100, Ordering::Relaxed);
+        assert_eq!(
+            step.line(Duration::from_secs(30)),
+            "rendering: 100 of 400 tiles (25%), 30 s so far, about 1 min 30 s left"
+        );
+        assert_eq!(
+            Step::named("preparing").line(Duration::from_secs(61)),
+            "preparing: 1 min 01 s so far"
+        );
+    }
+
+    #[test]
+    fn intervals_are_seconds_and_zero_turns_lines_off() {
+        assert_eq!(parse_interval("0"), Ok(None));
+        assert_eq!(
+            parse_interval(" 2.5 "),
+            Ok(Some(Duration::from_millis(2500)))
+        );
+        for bad in ["-1", "NaN", "inf", "1e9", "ten", ""] {
+            assert!(parse_interval(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn a_quiet_step_returns_its_value() {
+        assert_eq!(watch(&Step::named("adding"), true, || 2 + 2), 4);
+    }
+}
