@@ -577,25 +577,28 @@ pub fn load(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
 /// `compressed`) or MetaImage (`.mha`, zlib when `compressed`). The
 /// detached forms (`.nhdr`, `.mhd`) and NIfTI are read, not written.
 pub fn write(path: &Path, vol: &Volume, compressed: bool) -> Result<(), VolumeError> {
-    let name = path.to_string_lossy().to_ascii_lowercase();
-    if name.ends_with(".nrrd") {
-        let encoding = if compressed {
-            nrrd::Encoding::Gzip
-        } else {
-            nrrd::Encoding::Raw
-        };
-        nrrd::write(path, vol, encoding)
-    } else if name.ends_with(".mha") {
-        metaimage::write(path, vol, compressed)
-    } else {
-        Err(VolumeError::unsupported(
+    let ext = path
+        .extension()
+        .map(|e| e.to_string_lossy().to_ascii_lowercase());
+    match ext.as_deref() {
+        Some("nrrd") => {
+            let encoding = if compressed {
+                nrrd::Encoding::Gzip
+            } else {
+                nrrd::Encoding::Raw
+            };
+            nrrd::write(path, vol, encoding)
+        }
+        Some("mha") => metaimage::write(path, vol, compressed),
+        _ => Err(VolumeError::unsupported(
             path,
-            "volumes are written as .nrrd or .mha",
-        ))
+            format!("volumes are written as .{}", WRITTEN_FORMATS.join(" or .")),
+        )),
     }
 }
 
-/// The formats [`write`](fn@write) writes, by extension.
+/// The extensions [`write`](fn@write) writes (the one table the CLI's
+/// checks name).
 pub const WRITTEN_FORMATS: [&str; 2] = ["nrrd", "mha"];
 
 /// The volume formats [`load`] knows by their file names (anything else
@@ -647,6 +650,30 @@ pub(crate) fn scrambled_u8(dims: [usize; 3], offset: usize) -> Volume {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every extension [`WRITTEN_FORMATS`] names writes (either case, plain
+    /// and compressed) a file that loads back as the volume; any other is
+    /// refused with the list.
+    #[test]
+    fn written_formats_are_what_write_writes() {
+        let dir = std::env::temp_dir().join(format!("snell-write-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let vol = scrambled_u8([5, 4, 3], 2);
+        for ext in WRITTEN_FORMATS {
+            for (name, compressed) in [(ext.to_string(), false), (ext.to_uppercase(), true)] {
+                let p = dir.join(format!("v.{name}"));
+                write(&p, &vol, compressed).unwrap();
+                let back = load(&p, &LoadOptions::default()).unwrap();
+                assert_eq!(back.dims(), vol.dims(), "{name}");
+                assert_eq!(back.samples(), vol.samples(), "{name}");
+            }
+        }
+        for name in ["v.nhdr", "v.nii", "v.raw", "nrrd", "v.nrrd.txt"] {
+            let err = write(&dir.join(name), &vol, false).unwrap_err().to_string();
+            assert!(err.contains("written as .nrrd or .mha"), "{name}: {err}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 
     #[test]
     fn decode_big_endian_u16_and_scaling() {
