@@ -24,7 +24,7 @@ pub(super) fn plain_value(v: &toml::Value) -> String {
 /// own gives it as `whole`, which an unsigned type's range gives way to.
 /// `msg` is the message alone ([`toml::de::Error::message`]): the caller
 /// names the key.
-pub(crate) fn plain_serde_message(msg: &str, whole: Option<(u32, u32)>) -> String {
+pub(super) fn plain_serde_message(msg: &str, whole: Option<(u32, u32)>) -> String {
     let msg = msg.trim().replace('\n', " ");
     let expected = |e: &str| -> String {
         let e = e.trim();
