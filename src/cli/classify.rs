@@ -3,6 +3,7 @@
 //! the proven crossings.
 
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicUsize, Ordering};
 
 use anyhow::Context;
 use clap::Args as ClapArgs;
@@ -12,6 +13,7 @@ use snell::filter::Field;
 use snell::lattice::Lattice;
 
 use super::common::VolumeArgs;
+use super::progress::{self, Count, Step};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -60,7 +62,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             })
             .collect::<anyhow::Result<_>>()?
     };
-    let vol = a.vol.load(&a.volume)?;
+    let reading = Step::named(format!("reading {}", a.volume.display()));
+    let vol = progress::watch(&reading, false, || a.vol.load(&a.volume))?;
     let (lo, hi) = vol.value_range();
     if !(a.iso >= lo as f64 && a.iso <= hi as f64) {
         eprintln!(
@@ -72,14 +75,31 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         );
     }
     let start = std::time::Instant::now();
-    let field = Field::new(&vol, kind);
+    let field = progress::watch(&Step::named("prefiltering"), false, || {
+        Field::new(&vol, kind)
+    });
     let prefilter_s = start.elapsed().as_secs_f64();
     let lattice = Lattice::new(field.kernel(), field.dims());
     let iso = field.separating_iso(a.iso);
-    let results: Vec<classify::Classification> = methods
-        .iter()
-        .map(|&m| classify::classify(&field, iso, m))
-        .collect();
+    let done = AtomicUsize::new(0);
+    let classifying = Step {
+        what: "classifying".into(),
+        count: Some(Count {
+            done: &done,
+            total: methods.len(),
+            unit: "methods",
+        }),
+    };
+    let results: Vec<classify::Classification> = progress::watch(&classifying, false, || {
+        methods
+            .iter()
+            .map(|&m| {
+                let r = classify::classify(&field, iso, m);
+                done.fetch_add(1, Ordering::Relaxed);
+                r
+            })
+            .collect()
+    });
     let count = |m: Method| {
         results
             .iter()
