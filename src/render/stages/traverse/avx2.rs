@@ -1092,7 +1092,7 @@ mod tests {
                     let got = unsafe { span_of(a, lo, hi) };
                     assert_eq!(
                         got,
-                        super::super::AXIS_SPAN[a][lo][hi],
+                        super::super::cell::AXIS_SPAN[a][lo][hi],
                         "axis {a} {lo}..={hi}"
                     );
                 }

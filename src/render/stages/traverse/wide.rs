@@ -580,7 +580,7 @@ unsafe fn clamped_floor(x: __m512d, lo: __m512d, hi: __m512d) -> __m512i {
 /// The sub-cell bits whose index along the axis of stride `s = 2^log` (1,
 /// 4, 16 in the 4³ layout) lies in `lo..=hi`: `rep·(2^(s(hi+1)) − 2^(s·lo))`, with
 /// `rep` one bit per row along that axis — what the scalar walk looks up
-/// in [`super::AXIS_SPAN`] (tested equal). Shifts by 64 give 0, so the top
+/// in [`super::cell::AXIS_SPAN`] (tested equal). Shifts by 64 give 0, so the top
 /// row needs no special case.
 #[inline(always)]
 unsafe fn axis_span(rep: u64, log: u64, lo: __m512i, hi: __m512i) -> __m512i {
@@ -1336,7 +1336,7 @@ mod tests {
                     let got = unsafe { span_of(a, lo, hi) };
                     assert_eq!(
                         got,
-                        super::super::AXIS_SPAN[a][lo][hi],
+                        super::super::cell::AXIS_SPAN[a][lo][hi],
                         "axis {a} {lo}..={hi}"
                     );
                 }
