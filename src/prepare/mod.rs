@@ -9,11 +9,11 @@
 //! re-rendering a scene with a new camera or ior rebuilds nothing. With a
 //! cache directory, fields and tags are also stored on disk under the volume's
 //! content hash and reused by later processes. Disk files are written
-//! atomically and validated on read; a damaged or foreign file is ignored
-//! (and rebuilt), never trusted.
+//! atomically and validated on read ([`disk`] holds their format); a damaged
+//! or foreign file is ignored (and rebuilt), never trusted.
 
 use std::collections::HashMap;
-use std::io::{Read, Write};
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex, OnceLock};
 use std::time::Instant;
@@ -21,13 +21,17 @@ use std::time::Instant;
 use crate::classify::{
     self, CurvatureBounds, Method, PlaneBounds, SubCellMasks, TaggedIndex, Tags, curvature, plane,
 };
-use crate::filter::coeffs::{Coefficient, Coeffs};
+use crate::filter::coeffs::Coefficient;
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
 use crate::render::PrepareTimes;
 use crate::scene::{RenderSettings, Scene, SceneError, Storage, Traversal, VolumeSource};
-use crate::volume::{LoadOptions, Volume, WordHash};
+use crate::volume::{LoadOptions, Volume};
+
+mod disk;
+
+use disk::{field_name, read_field, read_tags, write_field, write_tags};
 
 /// Runs `$body` with `$f` bound to the `&Arc<Field<T>>` inside an
 /// [`AnyField`], whatever its storage `T`.
@@ -678,162 +682,6 @@ fn check_distance_maps(scene: &Scene, volume: &Volume, limit: u64) -> Result<(),
             hb(limit)
         ),
     })
-}
-
-// Version 2 ends each file with a checksum of its values (version 1 files
-// are ignored and rewritten).
-const FIELD_MAGIC: &[u8; 8] = b"SNLCOEF2";
-const TAGS_MAGIC: &[u8; 8] = b"SNLTAGS2";
-
-/// Reads the checksum that ends a file and compares it with `sum`, the hash
-/// of the file's values: a damaged file of the right length (a flipped bit,
-/// a block of zeros) would otherwise be read as good and render a wrong
-/// surface.
-fn check_sum(r: &mut impl Read, sum: WordHash) -> std::io::Result<()> {
-    if read_u64(r)? != sum.value() {
-        return Err(bad("checksum mismatch (damaged file)"));
-    }
-    Ok(())
-}
-
-fn write_u64s(w: &mut dyn Write, v: &[u64]) -> std::io::Result<()> {
-    for x in v {
-        w.write_all(&x.to_le_bytes())?;
-    }
-    Ok(())
-}
-
-/// A field's name in cache keys and files: the filter's, and the storage
-/// unless it is `f64` (so `f64` cache files keep their names); for `f16`
-/// also the iso-value its coefficients are centred on.
-fn field_name(filter: FilterKind, storage: Storage, centre: f64) -> String {
-    match storage {
-        Storage::F64 => filter.cache_key(),
-        Storage::F16 => format!(
-            "{}-{}-{:016x}",
-            filter.cache_key(),
-            storage.name(),
-            centre.to_bits()
-        ),
-        s => format!("{}-{}", filter.cache_key(), s.name()),
-    }
-}
-
-/// Coefficients are written as `f64` whatever the storage (exact for `f32`).
-fn write_field<T: Coefficient>(w: &mut dyn Write, f: &Field<T>) -> std::io::Result<()> {
-    w.write_all(FIELD_MAGIC)?;
-    let key = f.kind().cache_key();
-    write_u64s(w, &[key.len() as u64])?;
-    w.write_all(key.as_bytes())?;
-    let d = f.dims();
-    write_u64s(w, &[d[0] as u64, d[1] as u64, d[2] as u64])?;
-    write_u64s(w, &[f.coeffs().interior().len() as u64])?;
-    let mut sum = WordHash::new();
-    for v in f.coeffs().interior() {
-        let bits = v.to_f64().to_bits();
-        sum.add(bits);
-        w.write_all(&bits.to_le_bytes())?;
-    }
-    write_u64s(w, &[sum.value()])
-}
-
-fn read_exact_vec(r: &mut impl Read, n: usize) -> std::io::Result<Vec<u8>> {
-    let mut v = vec![0u8; n];
-    r.read_exact(&mut v)?;
-    Ok(v)
-}
-
-fn read_u64(r: &mut impl Read) -> std::io::Result<u64> {
-    let mut b = [0u8; 8];
-    r.read_exact(&mut b)?;
-    Ok(u64::from_le_bytes(b))
-}
-
-fn bad(msg: &str) -> std::io::Error {
-    std::io::Error::new(std::io::ErrorKind::InvalidData, msg.to_string())
-}
-
-fn read_field<T: Coefficient>(
-    path: &Path,
-    filter: FilterKind,
-    dims: [usize; 3],
-) -> std::io::Result<Field<T>> {
-    let mut r = std::io::BufReader::new(crate::input::open(path)?);
-    if &read_exact_vec(&mut r, 8)?[..] != FIELD_MAGIC {
-        return Err(bad("not a coefficient cache file"));
-    }
-    let klen = read_u64(&mut r)?;
-    if klen > 256 {
-        return Err(bad("bad key"));
-    }
-    let key = read_exact_vec(&mut r, klen as usize)?;
-    if key != filter.cache_key().as_bytes() {
-        return Err(bad("filter mismatch"));
-    }
-    let d = [read_u64(&mut r)?, read_u64(&mut r)?, read_u64(&mut r)?];
-    if d != dims.map(|x| x as u64) {
-        return Err(bad("dims mismatch"));
-    }
-    let n = read_u64(&mut r)?;
-    if n != dims.iter().product::<usize>() as u64 {
-        return Err(bad("length mismatch"));
-    }
-    let mut vals = Vec::with_capacity(n as usize);
-    let mut sum = WordHash::new();
-    let mut b = [0u8; 8];
-    for _ in 0..n {
-        r.read_exact(&mut b)?;
-        let bits = u64::from_le_bytes(b);
-        sum.add(bits);
-        vals.push(f64::from_bits(bits));
-    }
-    check_sum(&mut r, sum)?;
-    if r.read(&mut b)? != 0 {
-        return Err(bad("trailing data"));
-    }
-    if vals.iter().any(|v| !v.is_finite()) {
-        return Err(bad("non-finite coefficient"));
-    }
-    Ok(Field::from_coeffs(
-        filter,
-        Coeffs::from_interior(dims, &vals, |v| T::from_f64(*v)),
-    ))
-}
-
-fn write_tags(w: &mut dyn Write, t: &Tags) -> std::io::Result<()> {
-    w.write_all(TAGS_MAGIC)?;
-    write_u64s(w, &t.cells.map(|c| c as u64))?;
-    write_u64s(w, &[t.words().len() as u64])?;
-    write_u64s(w, t.words())?;
-    let mut sum = WordHash::new();
-    t.words().iter().for_each(|&x| sum.add(x));
-    write_u64s(w, &[sum.value()])
-}
-
-fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<Tags> {
-    let mut r = std::io::BufReader::new(crate::input::open(path)?);
-    if &read_exact_vec(&mut r, 8)?[..] != TAGS_MAGIC {
-        return Err(bad("not a tags cache file"));
-    }
-    let cells = [read_u64(&mut r)?, read_u64(&mut r)?, read_u64(&mut r)?];
-    if cells != lattice.cells.map(|c| c as u64) {
-        return Err(bad("lattice mismatch"));
-    }
-    let n = read_u64(&mut r)?;
-    if n != lattice.cell_count().div_ceil(64) as u64 {
-        return Err(bad("length mismatch"));
-    }
-    let words = (0..n)
-        .map(|_| read_u64(&mut r))
-        .collect::<std::io::Result<Vec<u64>>>()?;
-    let mut sum = WordHash::new();
-    words.iter().for_each(|&x| sum.add(x));
-    check_sum(&mut r, sum)?;
-    let mut b = [0u8; 1];
-    if r.read(&mut b)? != 0 {
-        return Err(bad("trailing data"));
-    }
-    Tags::from_words(lattice.cells, words).ok_or_else(|| bad("bad tag words"))
 }
 
 #[cfg(test)]
