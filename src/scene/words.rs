@@ -212,9 +212,6 @@ fn dotted_key(key: &str) -> String {
         .join(".")
 }
 
-/// A scene file TOML refused: a number out of TOML's range is named by its
-/// key (as a `--set` of the same value is); other syntax errors keep TOML's
-/// message on one line.
 /// A TOML syntax error on one line: where (line and column), what, and the
 /// line it is on (its first 80 characters), instead of the parser's
 /// multi-line drawing, whose caret means nothing once joined into one line.
@@ -240,6 +237,9 @@ fn syntax_message(text: &str, e: &toml::de::Error) -> String {
     format!("line {line_no}, column {column}: {what} (in: {line})")
 }
 
+/// A scene file TOML refused: a number out of TOML's range is named by its
+/// key (as a `--set` of the same value is); other syntax errors are put on one
+/// line ([`syntax_message`]).
 pub(super) fn syntax_error(text: &str, path: &Path, e: &toml::de::Error) -> SceneError {
     let plain = || SceneError::Syntax {
         path: path.to_path_buf(),

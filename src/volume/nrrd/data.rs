@@ -31,15 +31,8 @@ pub(super) fn raw_region<'a>(
         what: what.to_string(),
     };
     let after_header = byte_range(bytes, start, bytes.len() as u64).unwrap_or(&[]);
-    let after_lines = skip_lines_in(after_header, layout.line_skip).ok_or_else(|| {
-        VolumeError::format(
-            path,
-            format!(
-                "line skip {} passes the end of the data ({what})",
-                layout.line_skip
-            ),
-        )
-    })?;
+    let after_lines = skip_lines_in(after_header, layout.line_skip)
+        .ok_or_else(|| line_skip_past_end(path, layout, what))?;
     let len = after_lines.len() as u64;
     let data = match layout.byte_skip {
         ByteSkip::DataAtEnd => {
@@ -84,12 +77,8 @@ pub(super) fn ascii_region(
 ) -> Result<(Vec<u8>, u64), VolumeError> {
     let fmt = |msg: String| VolumeError::format(path, msg);
     let after_header = byte_range(bytes, start, bytes.len() as u64).unwrap_or(&[]);
-    let after_lines = skip_lines_in(after_header, layout.line_skip).ok_or_else(|| {
-        fmt(format!(
-            "line skip {} passes the end of the data ({what})",
-            layout.line_skip
-        ))
-    })?;
+    let after_lines = skip_lines_in(after_header, layout.line_skip)
+        .ok_or_else(|| line_skip_past_end(path, layout, what))?;
     let text = match layout.byte_skip {
         ByteSkip::DataAtEnd => {
             return Err(fmt(
@@ -213,15 +202,7 @@ pub(super) fn gzip_region<R: BufRead>(
 ) -> Result<(Vec<u8>, Extra), VolumeError> {
     let skipped_lines = skip_lines_from(&mut src, layout.line_skip)
         .map_err(|e| VolumeError::io(path, e))?
-        .ok_or_else(|| {
-            VolumeError::format(
-                path,
-                format!(
-                    "line skip {} passes the end of the data ({what})",
-                    layout.line_skip
-                ),
-            )
-        })?;
+        .ok_or_else(|| line_skip_past_end(path, layout, what))?;
     let compressed = compressed.saturating_sub(skipped_lines);
     let byte_skip = match layout.byte_skip {
         ByteSkip::Bytes(n) => n,
@@ -389,4 +370,15 @@ impl<R: BufRead> Read for GzMembers<R> {
             return Ok(0);
         }
     }
+}
+
+/// The error of a `line skip` longer than the data it skips in.
+fn line_skip_past_end(path: &Path, layout: &Layout, what: &str) -> VolumeError {
+    VolumeError::format(
+        path,
+        format!(
+            "line skip {} passes the end of the data ({what})",
+            layout.line_skip
+        ),
+    )
 }
