@@ -54,13 +54,7 @@ impl Step<'_> {
             None => format!("{}: {so_far} so far", self.what),
             Some(c) => {
                 let done = c.done.load(Ordering::Relaxed).min(c.total);
-                let left = match done {
-                    0 => String::new(),
-                    d => {
-                        let rest = elapsed.mul_f64((c.total - d) as f64 / d as f64);
-                        format!(", about {} left", span(rest))
-                    }
-                };
+                let left = left_note(elapsed, done as u64, c.total as u64);
                 format!(
                     "{}: {done} of {} {} ({}%), {so_far} so far{left}",
                     self.what,
@@ -82,10 +76,21 @@ impl Step<'_> {
             }
             Some(c) => {
                 let b = indicatif::ProgressBar::new(c.total as u64).with_elapsed(so_far);
-                b.set_style(style(&format!(
-                    "{} [{{bar:40}}] {{pos}}/{{len}} {}, {{eta}} left",
-                    self.what, c.unit
-                )));
+                // indicatif's own `{eta}` extrapolates from the latest
+                // ticks' rate, which the bar (started a second in, its first
+                // position a jump from 0) showed as "0s" throughout; the log
+                // lines' estimate from the whole step's rate is the one shown.
+                let left = |s: &indicatif::ProgressState, w: &mut dyn std::fmt::Write| {
+                    let note = left_note(s.elapsed(), s.pos(), s.len().unwrap_or(0));
+                    let _ = w.write_str(&note);
+                };
+                b.set_style(
+                    style(&format!(
+                        "{} [{{bar:40}}] {{pos}}/{{len}} {}{{left}}",
+                        self.what, c.unit
+                    ))
+                    .with_key("left", left),
+                );
                 b
             }
         }
@@ -201,6 +206,18 @@ fn parse_interval(s: &str) -> Result<Option<Duration>, String> {
     }
 }
 
+/// `", about 1 min 30 s left"` when `done` of `total` units took `elapsed`:
+/// the rest at the step's mean rate so far; empty while nothing is done.
+fn left_note(elapsed: Duration, done: u64, total: u64) -> String {
+    match done.min(total) {
+        0 => String::new(),
+        d => {
+            let rest = elapsed.mul_f64((total - d) as f64 / d as f64);
+            format!(", about {} left", span(rest))
+        }
+    }
+}
+
 /// A duration as a log reads it: `42 s`, `3 min 05 s`, `2 h 07 min`.
 fn span(d: Duration) -> String {
     let s = d.as_secs();
@@ -250,6 +267,73 @@ mod tests {
             Step::named("preparing").line(Duration::from_secs(61)),
             "preparing: 1 min 01 s so far"
         );
+    }
+
+    /// A terminal that keeps the last line the bar wrote.
+    #[derive(Debug, Default, Clone)]
+    struct Screen(std::sync::Arc<std::sync::Mutex<String>>);
+
+    impl indicatif::TermLike for Screen {
+        fn width(&self) -> u16 {
+            120
+        }
+        fn move_cursor_up(&self, _: usize) -> std::io::Result<()> {
+            Ok(())
+        }
+        fn move_cursor_down(&self, _: usize) -> std::io::Result<()> {
+            Ok(())
+        }
+        fn move_cursor_right(&self, _: usize) -> std::io::Result<()> {
+            Ok(())
+        }
+        fn move_cursor_left(&self, _: usize) -> std::io::Result<()> {
+            Ok(())
+        }
+        fn write_line(&self, s: &str) -> std::io::Result<()> {
+            self.write_str(s)
+        }
+        fn write_str(&self, s: &str) -> std::io::Result<()> {
+            if !s.trim().is_empty() {
+                *self.0.lock().unwrap() = s.trim_end().to_string();
+            }
+            Ok(())
+        }
+        fn clear_line(&self) -> std::io::Result<()> {
+            Ok(())
+        }
+        fn flush(&self) -> std::io::Result<()> {
+            Ok(())
+        }
+    }
+
+    #[test]
+    fn the_bar_says_the_time_left_as_the_log_lines_do() {
+        let done = AtomicUsize::new(0);
+        let step = Step {
+            what: "rendering".into(),
+            count: Some(Count {
+                done: &done,
+                total: 400,
+                unit: "tiles",
+            }),
+        };
+        let screen = Screen::default();
+        let bar = step.bar(Duration::from_secs(30));
+        bar.set_draw_target(indicatif::ProgressDrawTarget::term_like(Box::new(
+            screen.clone(),
+        )));
+        bar.force_draw();
+        let nothing_done = screen.0.lock().unwrap().clone();
+        assert!(nothing_done.ends_with("0/400 tiles"), "{nothing_done}");
+        done.store(100, Ordering::Relaxed);
+        step.tick(&bar);
+        bar.force_draw();
+        let shown = screen.0.lock().unwrap().clone();
+        assert!(
+            shown.ends_with("100/400 tiles, about 1 min 30 s left"),
+            "{shown}"
+        );
+        assert!(shown.starts_with("rendering ["), "{shown}");
     }
 
     #[test]
