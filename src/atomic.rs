@@ -1,13 +1,102 @@
 //! Atomic file output: write to a temporary file beside the target, sync, then
 //! rename over it. A failure (full disk, bad data, interrupted run) never
 //! leaves a partial file under the target's name.
+//!
+//! A command with several outputs (an image, its hits, its stats) can hold
+//! the renames back ([`hold`]) until every output is written, so that a
+//! failure on the last leaves none of them; and a signal that ends the
+//! process removes the temporary files first ([`discard_and_close`]).
 
 use std::fs::{self, File};
 use std::io::{self, BufWriter};
 use std::path::{Path, PathBuf};
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU64, Ordering};
 
 static COUNTER: AtomicU64 = AtomicU64::new(0);
+
+/// The process's temporary files and held renames.
+struct Pending {
+    /// Temporary files that exist now: being written, or written and held.
+    live: Vec<PathBuf>,
+    /// Written temporary files and their targets, in the order written,
+    /// while a [`Held`] guard lives.
+    held: Vec<(PathBuf, PathBuf)>,
+    /// The thread whose writes are held: the command's own (writes from
+    /// other threads, and other tests of the same binary, go straight on).
+    holding: Option<std::thread::ThreadId>,
+    /// Set when the process is ending on a signal: no new file is begun.
+    closing: bool,
+}
+
+static PENDING: Mutex<Pending> = Mutex::new(Pending {
+    live: Vec::new(),
+    held: Vec::new(),
+    holding: None,
+    closing: false,
+});
+
+fn pending() -> std::sync::MutexGuard<'static, Pending> {
+    // A panic elsewhere while holding the lock leaves the lists usable.
+    PENDING.lock().unwrap_or_else(|e| e.into_inner())
+}
+
+/// Holds back this thread's [`write_atomic`] renames until [`Held::commit`]:
+/// the outputs stay temporary files beside their targets. Dropped without a
+/// commit (the command failed), the guard removes them, so a command leaves
+/// all its outputs or none. Only for commands that do not read their own
+/// outputs back before they end.
+#[must_use = "dropping the guard discards the held outputs"]
+pub struct Held(());
+
+pub fn hold() -> Held {
+    pending().holding = Some(std::thread::current().id());
+    Held(())
+}
+
+impl Held {
+    /// Renames every held file onto its target, in the order written, and
+    /// goes on holding the next ones (a turntable commits frame by frame).
+    pub fn commit(&self) -> io::Result<()> {
+        let mut p = pending();
+        let held = std::mem::take(&mut p.held);
+        let mut result = Ok(());
+        for (tmp, target) in held {
+            if result.is_ok() {
+                result = fs::rename(&tmp, &target)
+                    .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", target.display())));
+            }
+            if result.is_err() {
+                let _ = fs::remove_file(&tmp);
+            }
+            p.live.retain(|l| *l != tmp);
+        }
+        result
+    }
+}
+
+impl Drop for Held {
+    fn drop(&mut self) {
+        let mut p = pending();
+        p.holding = None;
+        for (tmp, _) in std::mem::take(&mut p.held) {
+            let _ = fs::remove_file(&tmp);
+            p.live.retain(|l| *l != tmp);
+        }
+    }
+}
+
+/// Removes every temporary file this process has begun and not renamed,
+/// and refuses new ones: for a signal handler, just before the process
+/// exits.
+pub fn discard_and_close() {
+    let mut p = pending();
+    p.closing = true;
+    p.held.clear();
+    for tmp in std::mem::take(&mut p.live) {
+        let _ = fs::remove_file(&tmp);
+    }
+}
 
 fn temp_path(path: &Path) -> io::Result<PathBuf> {
     let dir = match path.parent() {
@@ -29,13 +118,28 @@ fn temp_path(path: &Path) -> io::Result<PathBuf> {
 /// replace a device, FIFO or socket by a plain file. Commands call it before
 /// their work, [`write_atomic`] before every write.
 pub fn check_target(path: &Path) -> io::Result<()> {
-    if fs::metadata(path).is_ok_and(|m| !m.is_file()) {
-        return Err(io::Error::new(
+    match fs::metadata(path) {
+        Ok(m) if m.is_dir() => Err(io::Error::new(
             io::ErrorKind::InvalidInput,
-            "not a regular file (a device, FIFO or socket)",
-        ));
+            "is a directory",
+        )),
+        Ok(m) if !m.is_file() => Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "is not a regular file (a device, FIFO or socket)",
+        )),
+        _ => Ok(()),
     }
-    Ok(())
+}
+
+/// Creates and removes a temporary file beside `path`: a command checks at
+/// its start that it will be able to write its output, not after its work.
+pub fn check_writable(path: &Path) -> io::Result<()> {
+    let probe = temp_path(path)?;
+    fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(&probe)?;
+    fs::remove_file(&probe)
 }
 
 /// Writes `path` through `write`, atomically.
@@ -59,17 +163,38 @@ pub fn write_atomic(
     };
     check_target(path)?;
     let tmp = temp_path(path)?;
-    let file = fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&tmp)?;
-    let mut out = BufWriter::new(file);
-    let result = write(&mut out)
-        .and_then(|()| out.into_inner().map_err(|e| e.into_error()))
-        .and_then(|file| file.sync_all())
-        .and_then(|()| fs::rename(&tmp, path));
+    let file = {
+        // Registered before it exists, so a signal's clean-up cannot miss it.
+        let mut p = pending();
+        if p.closing {
+            return Err(io::Error::new(io::ErrorKind::Interrupted, "interrupted"));
+        }
+        p.live.push(tmp.clone());
+        fs::OpenOptions::new()
+            .write(true)
+            .create_new(true)
+            .open(&tmp)
+    };
+    let written = file.and_then(|file| {
+        let mut out = BufWriter::new(file);
+        write(&mut out)
+            .and_then(|()| out.into_inner().map_err(|e| e.into_error()))
+            .and_then(|file| file.sync_all())
+    });
+    let mut p = pending();
+    let held = p.holding == Some(std::thread::current().id());
+    let result = written.and_then(|()| {
+        if held {
+            p.held.push((tmp.clone(), path.to_path_buf()));
+            return Ok(());
+        }
+        fs::rename(&tmp, path)
+    });
     if result.is_err() {
         let _ = fs::remove_file(&tmp); // best effort; the write error is what matters
+    }
+    if result.is_err() || !held {
+        p.live.retain(|l| *l != tmp);
     }
     result
 }
@@ -93,6 +218,37 @@ mod tests {
         assert!(err.is_err());
         assert_eq!(fs::read(&target).unwrap(), b"ok", "old file untouched");
         assert_eq!(fs::read_dir(&dir).unwrap().count(), 1, "no temp file left");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Held outputs appear together on commit, and not at all when the
+    /// guard is dropped without one.
+    #[test]
+    fn held_outputs_appear_together_or_not_at_all() {
+        let dir = std::env::temp_dir().join(format!("snell-held-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let names = |d: &Path| {
+            let mut v: Vec<String> = fs::read_dir(d)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            v.sort();
+            v
+        };
+        {
+            let held = hold();
+            write_atomic(&dir.join("a.png"), |w| w.write_all(b"a")).unwrap();
+            write_atomic(&dir.join("b.exr"), |w| w.write_all(b"b")).unwrap();
+            assert!(!dir.join("a.png").exists(), "held back");
+            assert_eq!(names(&dir).len(), 2, "two temporary files");
+            held.commit().unwrap();
+            assert_eq!(names(&dir), ["a.png", "b.exr"]);
+            write_atomic(&dir.join("c.json"), |w| w.write_all(b"c")).unwrap();
+            // Dropped without a commit: c.json's temporary file goes.
+        }
+        assert_eq!(names(&dir), ["a.png", "b.exr"]);
+        assert_eq!(fs::read(dir.join("b.exr")).unwrap(), b"b");
+        assert!(!pending().live.iter().any(|l| l.starts_with(&dir)));
         fs::remove_dir_all(&dir).unwrap();
     }
 }

@@ -20,6 +20,15 @@ fn main() -> ExitCode {
     unsafe {
         libc::signal(libc::SIGPIPE, libc::SIG_DFL);
     }
+    // Ended by Ctrl-C, SIGTERM or SIGHUP: the outputs being written are
+    // temporary files beside their targets; remove them, so an interrupted
+    // command leaves no debris, and exit as a shell expects of an
+    // interrupted command. (The handler runs on a thread of its own.)
+    let _ = ctrlc::set_handler(|| {
+        snell::atomic::discard_and_close();
+        eprintln!("interrupted");
+        std::process::exit(130);
+    });
     let args = cli::Cli::parse();
     match cli::run(args) {
         Ok(()) => ExitCode::SUCCESS,

@@ -24,17 +24,50 @@ pub enum Isa {
 
 impl Isa {
     /// The best the running CPU supports (`SNELL_ISA=avx512|avx2|portable`
-    /// forces a lower one, for comparisons).
+    /// forces a lower one, for comparisons; a value it cannot honour is
+    /// ignored with a warning, as the other `SNELL_*` variables' are).
     pub fn current() -> Isa {
         static ISA: OnceLock<Isa> = OnceLock::new();
         *ISA.get_or_init(|| {
             let best = Isa::detect();
-            match std::env::var("SNELL_ISA").ok().as_deref() {
-                Some("portable") => Isa::Portable,
-                Some("avx2") if best != Isa::Portable => Isa::Avx2,
-                _ => best,
+            let asked = std::env::var("SNELL_ISA").ok();
+            let (isa, why) = Isa::chosen(best, asked.as_deref());
+            if let Some(why) = why {
+                eprintln!("warning: SNELL_ISA: {why}");
             }
+            isa
         })
+    }
+
+    /// The level `SNELL_ISA = asked` gives on a CPU whose best is `best`,
+    /// and why it is not the one asked for, when it is not.
+    fn chosen(best: Isa, asked: Option<&str>) -> (Isa, Option<String>) {
+        let Some(asked) = asked else {
+            return (best, None);
+        };
+        let level = match asked.trim() {
+            "avx512" => Some(Isa::Avx512),
+            "avx2" => Some(Isa::Avx2),
+            "portable" => Some(Isa::Portable),
+            _ => None,
+        };
+        match level {
+            None => (
+                best,
+                Some(format!(
+                    "expected avx512, avx2 or portable, got '{asked}'; using {}",
+                    best.name()
+                )),
+            ),
+            Some(l) if l.lanes() > best.lanes() => (
+                best,
+                Some(format!(
+                    "this CPU cannot run {asked}; using {}",
+                    best.name()
+                )),
+            ),
+            Some(l) => (l, None),
+        }
     }
 
     /// Every level the running CPU can run, best first (for tests that
@@ -935,6 +968,26 @@ pub fn prefetch<T>(x: &T) {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// `SNELL_ISA` lowers the level; an unknown name or a level above the
+    /// CPU's is ignored with a reason (the caller's warning).
+    #[test]
+    fn snell_isa_lowers_the_level_or_says_why_not() {
+        use Isa::*;
+        assert_eq!(Isa::chosen(Avx512, None), (Avx512, None));
+        assert_eq!(Isa::chosen(Avx512, Some("avx2")), (Avx2, None));
+        assert_eq!(Isa::chosen(Avx2, Some("portable")), (Portable, None));
+        assert_eq!(Isa::chosen(Avx2, Some("avx2")), (Avx2, None));
+        let (isa, why) = Isa::chosen(Avx2, Some("avx512"));
+        assert_eq!(isa, Avx2);
+        assert_eq!(why.unwrap(), "this CPU cannot run avx512; using avx2+fma");
+        let (isa, why) = Isa::chosen(Avx512, Some("sse"));
+        assert_eq!(isa, Avx512);
+        assert_eq!(
+            why.unwrap(),
+            "expected avx512, avx2 or portable, got 'sse'; using avx512"
+        );
+    }
 
     #[test]
     fn row_loads_equal_gathers_on_every_isa() {

@@ -1774,3 +1774,78 @@ fn every_scene_key_is_in_the_readme_table() {
         "not in README.md's table of scene keys: {missing:?}"
     );
 }
+
+/// An output that cannot be written is refused before the render, and the
+/// render's other outputs are not left behind (`/proc` takes no new files,
+/// even from root).
+#[test]
+fn an_unwritable_output_is_refused_before_the_work() {
+    let t = Tmp::new("unwritable");
+    let png = t.path("o.png");
+    let o = run(&[
+        "render",
+        root().join(SPHERE).to_str().unwrap(),
+        "-o",
+        png.to_str().unwrap(),
+        "--stats",
+        "/proc/snell-stats.json",
+        "--set",
+        "image.width=32",
+        "--set",
+        "image.height=32",
+    ]);
+    assert_fails(&o, &["/proc/snell-stats.json: cannot write in /proc"]);
+    assert!(!png.exists(), "no image from a failed command");
+    assert_eq!(listing(&t.0), Vec::new());
+}
+
+/// Interrupted while its outputs are being written (Ctrl-C, SIGTERM), a
+/// render exits 130 and leaves no temporary file; its outputs appear all
+/// together or not at all.
+#[test]
+fn an_interrupted_render_leaves_no_debris() {
+    for signal in [libc::SIGINT, libc::SIGTERM] {
+        let t = Tmp::new(&format!("interrupt-{signal}"));
+        let mut child = bin()
+            .args([
+                "render",
+                root().join(SPHERE).to_str().unwrap(),
+                "-o",
+                t.path("o.png").to_str().unwrap(),
+                "--hits",
+                t.path("h.exr").to_str().unwrap(),
+                "--exr",
+                t.path("c.exr").to_str().unwrap(),
+                "--set",
+                "image.width=2048",
+                "--set",
+                "image.height=2048",
+                "-q",
+            ])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        // Waits for the first temporary output file, then interrupts.
+        let start = std::time::Instant::now();
+        let mut writing = false;
+        while child.try_wait().unwrap().is_none() && start.elapsed().as_secs() < 60 {
+            let names: Vec<String> = std::fs::read_dir(&t.0)
+                .unwrap()
+                .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+                .collect();
+            if names.iter().any(|n| n.ends_with(".tmp")) {
+                writing = true;
+                // SAFETY: signalling our own child process.
+                unsafe { libc::kill(child.id() as i32, signal) };
+                break;
+            }
+            std::thread::sleep(std::time::Duration::from_micros(200));
+        }
+        let o = child.wait_with_output().unwrap();
+        assert!(writing, "the render ended before its outputs were begun");
+        assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+        assert!(stderr(&o).contains("interrupted"), "{}", stderr(&o));
+        let left: Vec<PathBuf> = listing(&t.0).into_iter().map(|(p, _)| p).collect();
+        assert!(left.is_empty(), "{left:?}");
+    }
+}

@@ -246,7 +246,10 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
         bail!("{}: is a directory", path.display());
     }
     snell::atomic::check_target(path)
-        .map_err(|e| anyhow::anyhow!("{}: is {e}; outputs go to files", path.display()))?;
+        .map_err(|e| anyhow::anyhow!("{}: {e}; outputs go to files", path.display()))?;
+    snell::atomic::check_writable(path).map_err(|e| {
+        anyhow::anyhow!("{}: cannot write in {}: {e}", path.display(), dir.display())
+    })?;
     Ok(path.to_path_buf())
 }
 

@@ -91,7 +91,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         if let Some(c) = checker {
             anyhow::ensure!(
                 c.is_finite() && c > 0.0,
-                "--checker must be a finite number > 0, got {c}"
+                "--checker must be a finite number > 0, got {}",
+                snell::human::exact(c)
             );
         }
         // Parts of a frame (`render --region`) of one size but from different

@@ -64,7 +64,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     if let Some(g) = a.max_gradient {
         if !(g.is_finite() && g > 0.0) {
-            bail!("--max-gradient must be > 0, got {g}");
+            bail!("--max-gradient must be > 0, got {}", snell::human::exact(g));
         }
         opts.max_gradient = Some(g);
     }

@@ -45,12 +45,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.parts[0].display()
         );
     }
+    // The EXR and the PNG appear together, or neither does.
+    let held = snell::atomic::hold();
     whole
         .write_exr(&a.output)
         .with_context(|| a.output.display().to_string())?;
     if let Some(p) = &a.png {
         whole.write_png(p)?;
     }
+    held.commit()?;
     eprintln!(
         "merged {} parts into {} ({}x{}, channels {})",
         parts.len(),

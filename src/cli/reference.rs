@@ -43,7 +43,20 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             r.approximate_holes
         );
     }
+    if let snell::scene::VolumeSource::Phantom(snell::phantom::PhantomSpec::Sphere(spec)) =
+        &scene.volume
+        && spec.noise > 0.0
+    {
+        // The reference is the truth the noise hides, what a filter's
+        // render of the noisy volume is measured against.
+        eprintln!(
+            "note: the phantom's noise (σ = {}) is left out: these are the noise-free spheres",
+            spec.noise
+        );
+    }
     let hits = r.render(&scene);
+    // The hits and the image appear together, or neither does.
+    let held = snell::atomic::hold();
     hits.write_exr(&a.hits)?;
     if let Some(o) = &a.output {
         let rgb: Vec<u8> = (0..hits.u.len())
@@ -58,5 +71,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             .collect();
         snell::film::write_png_rgb(o, hits.width, hits.height, &rgb)?;
     }
+    held.commit()?;
     Ok(())
 }

@@ -77,6 +77,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     super::common::set_memory_limit(a.memory_limit.as_deref())?;
     let scene = load_scene(&a.scene, &a.set)?;
     let outputs = Outputs::of(&a)?;
+    // The image, hits, colour EXR, stats and timeline appear together when
+    // the last is written, or not at all.
+    let held = snell::atomic::hold();
     check_distinct(
         &outputs
             .files
@@ -154,9 +157,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         quiet: a.quiet,
     };
     match a.orbit {
-        None => render_one(&a, &scene, &renderer, &outputs, trace),
-        Some(n) => render_orbit(&a, scene, &renderer, &outputs, n),
+        None => render_one(&a, &scene, &renderer, &outputs, trace)?,
+        Some(n) => render_orbit(&a, scene, &renderer, &outputs, n, &held)?,
     }
+    held.commit()?;
+    Ok(())
 }
 
 /// What every frame of a run shares: the worker pool, the preparation, and
@@ -215,15 +220,16 @@ fn render_one(
     Ok(())
 }
 
-/// `--orbit N`: the frames of a turn, each written as it is done, each
-/// one's time printed; then the median and the median frame's table.
-/// Frame times leave out writing the files.
+/// `--orbit N`: the frames of a turn, each written as it is done (`held`
+/// committed frame by frame), each one's time printed; then the median and
+/// the median frame's table. Frame times leave out writing the files.
 fn render_orbit(
     a: &Args,
     mut scene: Scene,
     renderer: &Renderer,
     outputs: &Outputs,
     n: u32,
+    held: &snell::atomic::Held,
 ) -> anyhow::Result<()> {
     let orbit = Orbit::about_volume(&scene, renderer.prep.volume.extent(), n)?;
     let mut runs: Vec<(f64, render::RenderStats)> = Vec::with_capacity(n as usize);
@@ -233,6 +239,7 @@ fn render_orbit(
         let frame = renderer.frame(&scene, None);
         let ms = start.elapsed().as_secs_f64() * 1e3;
         outputs.write(&frame, Some(k))?;
+        held.commit()?;
         if !a.quiet {
             eprintln!(
                 "frame {k} at {}°: {ms:.1} ms, {}",

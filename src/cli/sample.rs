@@ -1,6 +1,6 @@
 //! `snell sample`: the reconstructed field and its gradient at given points.
 
-use std::io::{BufRead, BufReader, Write};
+use std::io::{BufRead, BufReader, Read, Write};
 use std::path::PathBuf;
 
 use anyhow::{Context, bail};
@@ -48,14 +48,40 @@ fn header_columns(t: &str) -> Option<usize> {
     (xyz && fields.iter().all(|f| f.parse::<f64>().is_err())).then_some(fields.len())
 }
 
-fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> {
+/// Longest line of a points file: a row of this command's own output is
+/// about 180 bytes; anything far longer is not a points file (stdin from
+/// `/dev/zero` would otherwise grow one line until memory ran out).
+const MAX_LINE: usize = 4096;
+
+/// Memory a point takes while the file is read (all of it is read, and
+/// checked, before the first value is written).
+const POINT_BYTES: u64 = std::mem::size_of::<DVec3>() as u64;
+
+fn parse_points(reader: impl BufRead, name: &str, limit: u64) -> anyhow::Result<Vec<DVec3>> {
     let mut out = Vec::new();
     let mut first = true;
     // Numbers per row: three, or as many as a header names (the point is
     // the first three: this command's output reads back as its points).
     let mut columns = 3;
-    for (n, line) in reader.lines().enumerate() {
-        let line = line.with_context(|| format!("{name}: read error at line {}", n + 1))?;
+    let mut reader = reader;
+    let mut raw = Vec::new();
+    for n in 0.. {
+        raw.clear();
+        let read = (&mut reader)
+            .take(MAX_LINE as u64 + 1)
+            .read_until(b'\n', &mut raw)
+            .with_context(|| format!("{name}: read error at line {}", n + 1))?;
+        if read == 0 {
+            break;
+        }
+        if raw.len() > MAX_LINE {
+            bail!(
+                "{name}: line {} is longer than {MAX_LINE} bytes; expected one point x,y,z per line",
+                n + 1
+            );
+        }
+        let line = std::str::from_utf8(&raw)
+            .with_context(|| format!("{name}: line {} is not UTF-8 text", n + 1))?;
         let t = line.trim();
         if t.is_empty() || t.starts_with('#') {
             continue;
@@ -75,10 +101,18 @@ fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> 
             Some(v)
                 if (v.len() == 3 || v.len() == columns) && v[..3].iter().all(|x| x.is_finite()) =>
             {
+                if (out.len() as u64 + 1) * POINT_BYTES > limit {
+                    bail!(
+                        "{name}: line {}: more than {} points would exceed the memory limit of {} (set --memory-limit or SNELL_MEMORY_LIMIT to raise it, or split the file)",
+                        n + 1,
+                        out.len(),
+                        snell::volume::limits::human_bytes(limit)
+                    );
+                }
                 out.push(DVec3::new(v[0], v[1], v[2]))
             }
             _ => {
-                // A line of megabytes quoted whole would bury the message.
+                // A long line quoted whole would bury the message.
                 let shown: String = t.chars().take(80).collect();
                 let more = if shown.len() < t.len() { "…" } else { "" };
                 let what = if columns == 3 {
@@ -99,11 +133,12 @@ fn parse_points(reader: impl BufRead, name: &str) -> anyhow::Result<Vec<DVec3>> 
 pub fn run(a: Args) -> anyhow::Result<()> {
     let kind = super::common::filter_kind(&a.filter, a.lambda)?;
     let name = a.points.display().to_string();
+    let limit = super::common::memory_limit(a.vol.memory_limit.as_deref())?;
     let points = if name == "-" {
-        parse_points(std::io::stdin().lock(), "stdin")?
+        parse_points(std::io::stdin().lock(), "stdin", limit)?
     } else {
         let f = snell::input::open(&a.points).with_context(|| name.clone())?;
-        parse_points(BufReader::new(f), &name)?
+        parse_points(BufReader::new(f), &name, limit)?
     };
     let vol = a.vol.load(&a.volume)?;
     let d = vol.dims();
@@ -143,31 +178,53 @@ mod tests {
     /// line numbers of errors count every line of the file from 1.
     #[test]
     fn points_skip_a_header_and_number_lines_from_one() {
-        let p = parse_points("x,y,z,value,gx,gy,gz\n1,2,3\n".as_bytes(), "p").unwrap();
+        let p = parse_points("x,y,z,value,gx,gy,gz\n1,2,3\n".as_bytes(), "p", u64::MAX).unwrap();
         assert_eq!(p, vec![DVec3::new(1.0, 2.0, 3.0)]);
-        let p = parse_points("# points\nx y z\n1 2 3\n".as_bytes(), "p").unwrap();
+        let p = parse_points("# points\nx y z\n1 2 3\n".as_bytes(), "p", u64::MAX).unwrap();
         assert_eq!(p.len(), 1);
         // This command's output, gradient and all, reads back as its points.
         let p = parse_points(
             "x,y,z,value,gx,gy,gz\n1,2,3,0.5,1e-15,0,-2\n".as_bytes(),
             "p",
+            u64::MAX,
         )
         .unwrap();
         assert_eq!(p, vec![DVec3::new(1.0, 2.0, 3.0)]);
-        let e = parse_points("x,y,z,value\n1,2\n".as_bytes(), "p")
+        let e = parse_points("x,y,z,value\n1,2\n".as_bytes(), "p", u64::MAX)
             .unwrap_err()
             .to_string();
         assert!(
             e.contains("line 2: expected three") && e.contains("or 4"),
             "{e}"
         );
-        let e = parse_points("1,2,3\nx,y,z\n".as_bytes(), "p")
+        let e = parse_points("1,2,3\nx,y,z\n".as_bytes(), "p", u64::MAX)
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 2") && e.contains("x,y,z"), "{e}");
-        let e = parse_points("x,y,z\n4,5\n".as_bytes(), "p")
+        let e = parse_points("x,y,z\n4,5\n".as_bytes(), "p", u64::MAX)
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 2:"), "{e}");
+    }
+
+    /// A line without end (stdin from `/dev/zero`) stops at the cap, and
+    /// the points stop at the memory limit, each with its line number.
+    #[test]
+    fn endless_lines_and_too_many_points_are_refused() {
+        let zeros = std::io::BufReader::new(std::io::repeat(0));
+        let e = parse_points(zeros, "stdin", u64::MAX)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 1 is longer than 4096 bytes"), "{e}");
+        let e = parse_points("1,2,3\n4,5,6\n7,8,9\n".as_bytes(), "p", 2 * POINT_BYTES)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 3: more than 2 points"), "{e}");
+        let p = parse_points("1,2,3\n4,5,6\n".as_bytes(), "p", 2 * POINT_BYTES).unwrap();
+        assert_eq!(p.len(), 2);
+        let e = parse_points(&b"1,2,\xff\n"[..], "p", u64::MAX)
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line 1 is not UTF-8"), "{e}");
     }
 }

@@ -150,21 +150,23 @@ impl PovOptions {
         if !pos(self.accuracy) {
             return Err(PeerError::Invalid(format!(
                 "accuracy must be > 0, got {}",
-                self.accuracy
+                crate::human::exact(self.accuracy)
             )));
         }
         if let Some(g) = self.max_gradient
             && !pos(g)
         {
             return Err(PeerError::Invalid(format!(
-                "max_gradient must be > 0, got {g}"
+                "max_gradient must be > 0, got {}",
+                crate::human::exact(g)
             )));
         }
         if let Some(f) = self.gradient_safety
             && !pos(f)
         {
             return Err(PeerError::Invalid(format!(
-                "gradient safety must be > 0, got {f}"
+                "gradient safety must be > 0, got {}",
+                crate::human::exact(f)
             )));
         }
         Ok(())

@@ -43,7 +43,10 @@ fn check_non_negative(key: &'static str, x: f64) -> Result<(), PhantomError> {
     if !(x.is_finite() && x >= 0.0) {
         return Err(setting(
             key,
-            format!("must be a finite number >= 0, got {x}"),
+            format!(
+                "must be a finite number >= 0, got {}",
+                crate::human::exact(x)
+            ),
         ));
     }
     Ok(())

@@ -212,9 +212,9 @@ impl AnyField {
     ) -> Result<AnyField, SceneError> {
         Ok(match storage {
             Storage::F64 => AnyField::F64(Arc::new(Field::new(vol, filter))),
-            Storage::F32 => AnyField::F32(Arc::new(Field::<f32>::new_in(vol, filter))),
+            Storage::F32 => AnyField::F32(Arc::new(f32_field(vol, filter, Storage::F32)?)),
             Storage::F16 => AnyField::F16(Arc::new(f16_field(
-                Field::<f32>::new_in(vol, filter),
+                f32_field(vol, filter, Storage::F16)?,
                 centre,
             )?)),
         })
@@ -264,6 +264,31 @@ impl AnyField {
     }
 }
 
+/// `vol` prefiltered into `f32` coefficients, or an error when some overflow
+/// it: samples near f32's own limit, grown by the prefilter, would round to
+/// infinities and leave the surface undefined where they lie (`storage`,
+/// the scene's choice, names the setting in the message).
+fn f32_field(vol: &Volume, filter: FilterKind, storage: Storage) -> Result<Field<f32>, SceneError> {
+    use rayon::prelude::*;
+    let f = Field::<f32>::new_in(vol, filter);
+    let overflows = f
+        .coeffs()
+        .data()
+        .par_chunks(1 << 16)
+        .any(|chunk| chunk.iter().any(|c| !c.is_finite()));
+    if overflows {
+        let (lo, hi) = vol.value_range();
+        return Err(SceneError::Storage {
+            storage: storage.name(),
+            msg: format!(
+                "the prefiltered coefficients overflow f32's range (±{:e}) for samples from {lo:e} to {hi:e}; use \"f64\"",
+                f32::MAX
+            ),
+        });
+    }
+    Ok(f)
+}
+
 /// `f` less `centre`, rounded once to `f16` (so the values near the surface
 /// at iso `centre` are small, where `f16` is precise), or an error naming the
 /// largest when some lie beyond `f16`'s range (they would become
@@ -278,8 +303,9 @@ fn f16_field(f: Field<f32>, centre: f64) -> Result<Field<half::f16>, SceneError>
         return Err(SceneError::Storage {
             storage: Storage::F16.name(),
             msg: format!(
-                "the largest prefiltered coefficient less the iso-value {centre}, {max:.6e}, \
-                 is beyond f16's range (±65504); use \"f32\" or \"f64\""
+                "the largest prefiltered coefficient less the iso-value {}, {max:.6e}, \
+                 is beyond f16's range (±65504); use \"f32\" or \"f64\"",
+                crate::human::exact(centre)
             ),
         });
     }
@@ -830,6 +856,31 @@ mod tests {
             );
         }
         std::fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// Samples near f32's limit, prefiltered, overflow f32 (and so f16):
+    /// both storages refuse them, naming the overflow, where f64 holds them.
+    #[test]
+    fn coefficients_that_overflow_f32_are_refused() {
+        let samples: Vec<f32> = (0..8)
+            .map(|k| if k % 2 == 0 { 3.4e38 } else { -3.4e38 })
+            .collect();
+        let vol = Volume::new([2; 3], [1.0; 3], crate::volume::SampleType::F32, samples).unwrap();
+        let cubic = FilterKind::BSpline(3);
+        assert!(AnyField::new(&vol, cubic, Storage::F64, 0.0).is_ok());
+        for storage in [Storage::F32, Storage::F16] {
+            let e = AnyField::new(&vol, cubic, storage, 0.0)
+                .unwrap_err()
+                .to_string();
+            assert!(
+                e.contains(storage.name())
+                    && e.contains("overflow f32's range")
+                    && e.contains("-3.4e38 to 3.4e38"),
+                "{e}"
+            );
+        }
+        // Unfiltered, the same samples fit.
+        assert!(AnyField::new(&vol, FilterKind::Linear, Storage::F32, 0.0).is_ok());
     }
 
     #[test]

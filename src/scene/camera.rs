@@ -31,7 +31,7 @@ pub struct Camera {
 pub enum CameraError {
     #[error("position and look_at coincide")]
     NoDirection,
-    #[error("up is parallel to the viewing direction")]
+    #[error("up is zero or parallel to the viewing direction")]
     UpParallel,
     #[error("fov_y must be between 0 and 180 degrees (both excluded), got {0}")]
     BadFov(f64),

@@ -468,6 +468,14 @@ checker = 8.0
         assert!(e.contains("--set nonsense"), "{e}");
         let s = parse(&["volume.path=x.nrrd"]).unwrap();
         assert!(matches!(s.volume, VolumeSource::File { .. }));
+        // One key per --set: a second after a line break is refused, not
+        // dropped; a value broken over lines is still one value.
+        let e = parse(&["image.width=16\nimage.height=4"])
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("line break and more keys"), "{e}");
+        let s = parse(&["camera.up=[0.0,\n 1.0, 0.0]"]).unwrap();
+        assert_eq!(s.camera.up, DVec3::Y);
     }
 
     /// The default tile follows the first pass's rays per pixel; a tile

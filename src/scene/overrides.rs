@@ -29,6 +29,13 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
     }
     let value = value.trim();
     let parsed: toml::Value = match format!("v = {value}").parse::<toml::Table>() {
+        // `16\nimage.height=4` parses as two keys: the second would be
+        // dropped without a word.
+        Ok(t) if t.len() > 1 => {
+            return Err(err(
+                "the value holds a line break and more keys after it; give one section.key=value per --set",
+            ));
+        }
         Ok(mut t) => t.remove("v").unwrap_or(toml::Value::String(value.into())),
         // A number TOML cannot hold is refused as in a file, not taken
         // for a word.

@@ -15,6 +15,7 @@ use super::{
 };
 use crate::classify::Method;
 use crate::filter::FilterKind;
+use crate::human::exact;
 use crate::phantom::PhantomSpec;
 use crate::volume::{Endian, RawSpec, SampleType};
 
@@ -243,7 +244,10 @@ pub(super) fn resolve(
             if !(fov > 0.0 && fov < 180.0) {
                 return Err(bad(
                     "camera.fov_y",
-                    format!("must be between 0 and 180 degrees (both excluded), got {fov}"),
+                    format!(
+                        "must be between 0 and 180 degrees (both excluded), got {}",
+                        exact(fov)
+                    ),
                 ));
             }
             Projection::Perspective {
@@ -365,7 +369,10 @@ pub(super) fn resolve(
         ),
     })?;
     if !s.iso.is_finite() {
-        return Err(bad("surface.iso", format!("must be finite, got {}", s.iso)));
+        return Err(bad(
+            "surface.iso",
+            format!("must be finite, got {}", exact(s.iso)),
+        ));
     }
     for (key, ior) in [
         ("surface.ior", s.ior),
@@ -374,7 +381,10 @@ pub(super) fn resolve(
         if !(ior.is_finite() && ior > 0.0) {
             return Err(bad(
                 key,
-                format!("index of refraction must be a finite number > 0, got {ior}"),
+                format!(
+                    "index of refraction must be a finite number > 0, got {}",
+                    exact(ior)
+                ),
             ));
         }
     }
@@ -433,7 +443,10 @@ pub(super) fn resolve(
             if !(size.is_finite() && size > 0.0) {
                 return Err(bad(
                     "backdrop.checker",
-                    format!("square size must be a finite number > 0, got {size}"),
+                    format!(
+                        "square size must be a finite number > 0, got {}",
+                        exact(size)
+                    ),
                 ));
             }
             let colors = b.checker_colors.unwrap_or([[1.0; 3], [0.0; 3]]);
@@ -452,7 +465,7 @@ pub(super) fn resolve(
             if !(width.is_finite() && width > 0.0) {
                 return Err(bad(
                     "backdrop.width",
-                    format!("must be a finite number > 0, got {width}"),
+                    format!("must be a finite number > 0, got {}", exact(width)),
                 ));
             }
             let outside = b.outside.unwrap_or(f.image.background);
@@ -476,14 +489,20 @@ pub(super) fn resolve(
     if !(r.step.is_finite() && (MIN_STEP..=16.0).contains(&r.step)) {
         return Err(bad(
             "render.step",
-            format!("must be from {MIN_STEP} to 16 voxels, got {}", r.step),
+            format!(
+                "must be from {MIN_STEP} to 16 voxels, got {}",
+                exact(r.step)
+            ),
         ));
     }
     in_range("render.max_events", r.max_events, "")?;
     if !(r.tolerance.is_finite() && r.tolerance >= 1e-12 && r.tolerance <= 0.1) {
         return Err(bad(
             "render.tolerance",
-            format!("must be from 1e-12 to 0.1 voxels, got {}", r.tolerance),
+            format!(
+                "must be from 1e-12 to 0.1 voxels, got {}",
+                exact(r.tolerance)
+            ),
         ));
     }
     in_range("render.samples", r.samples, "")?;
@@ -525,7 +544,10 @@ pub(super) fn resolve(
     if !(r.prss_curvature.is_finite() && r.prss_curvature > 0.0) {
         return Err(bad(
             "render.prss_curvature",
-            format!("must be > 0 (checker squares), got {}", r.prss_curvature),
+            format!(
+                "must be > 0 (checker squares), got {}",
+                exact(r.prss_curvature)
+            ),
         ));
     }
     if !r.leaf.is_power_of_two() || r.leaf > 64 {

@@ -138,6 +138,15 @@ pub enum VolumeError {
         first: usize,
     },
     #[error(
+        "{path}: {count} samples (first at index {first}, {value:e}) are finite but beyond ±{max:e}, the range of the f32 samples snell holds; rescale the data"
+    , max = f32::MAX)]
+    BeyondF32 {
+        path: PathBuf,
+        count: usize,
+        first: usize,
+        value: f64,
+    },
+    #[error(
         "{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, or raw with --dims and --type)"
     )]
     UnknownFormat { path: PathBuf },
@@ -478,6 +487,9 @@ pub fn decode_samples(
     // including -0.0, so unscaled float samples keep their exact bits.
     let (slope, inter) = scale.unwrap_or((1.0, -0.0));
     let mut out: Vec<f32> = Vec::with_capacity(count);
+    // Finite values that f32 cannot hold (f64 data, or a NIfTI scaling):
+    // rounded they would read as infinities the file does not have.
+    let (mut beyond, mut first_beyond) = (0usize, (usize::MAX, 0.0f64));
     macro_rules! dec {
         ($t:ty, $n:expr) => {{
             for c in bytes.chunks_exact($n) {
@@ -486,7 +498,15 @@ pub fn decode_samples(
                     Endian::Little => <$t>::from_le_bytes(arr),
                     Endian::Big => <$t>::from_be_bytes(arr),
                 };
-                out.push((v as f64 * slope + inter) as f32);
+                let w = v as f64 * slope + inter;
+                let x = w as f32;
+                if x.is_infinite() && w.is_finite() {
+                    if beyond == 0 {
+                        first_beyond = (out.len(), w);
+                    }
+                    beyond += 1;
+                }
+                out.push(x);
             }
         }};
     }
@@ -499,6 +519,14 @@ pub fn decode_samples(
         SampleType::U32 => dec!(u32, 4),
         SampleType::F32 => dec!(f32, 4),
         SampleType::F64 => dec!(f64, 8),
+    }
+    if beyond > 0 {
+        return Err(VolumeError::BeyondF32 {
+            path: path.to_path_buf(),
+            count: beyond,
+            first: first_beyond.0,
+            value: first_beyond.1,
+        });
     }
     let mut nan = 0usize;
     let mut inf = 0usize;
@@ -690,6 +718,61 @@ mod tests {
         .unwrap();
         assert_eq!(bad, 0);
         assert_eq!(v, vec![(0x0102 * 2 + 1) as f32, (65535 * 2 + 1) as f32]);
+    }
+
+    /// Finite f64 samples (or scaled ones) beyond f32's range are refused
+    /// as such, with or without `allow_nan`: rounded to f32 they would be
+    /// infinities the file does not hold, and replacing them would erase them.
+    #[test]
+    fn decode_refuses_finite_samples_beyond_f32() {
+        let mut bytes = Vec::new();
+        for v in [0.0f64, 1e39, -1e300, f64::INFINITY] {
+            bytes.extend_from_slice(&v.to_le_bytes());
+        }
+        for allow_nan in [false, true] {
+            let p = Path::new("big.raw");
+            let e = decode_samples(
+                p,
+                &bytes,
+                SampleType::F64,
+                Endian::Little,
+                4,
+                None,
+                allow_nan,
+            )
+            .unwrap_err()
+            .to_string();
+            assert!(
+                e.contains("big.raw: 2 samples (first at index 1, 1e39) are finite but beyond"),
+                "{e}"
+            );
+        }
+        let e = decode_samples(
+            Path::new("s.nii"),
+            &[200u8],
+            SampleType::U8,
+            Endian::Little,
+            1,
+            Some((1e37, 0.0)),
+            false,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("1 samples (first at index 0, 2e39)"), "{e}");
+        // f64 infinities are the file's own: the non-finite rule.
+        let inf = f64::INFINITY.to_le_bytes();
+        let e = decode_samples(
+            Path::new("i"),
+            &inf,
+            SampleType::F64,
+            Endian::Little,
+            1,
+            None,
+            false,
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("1 infinite"), "{e}");
     }
 
     #[test]

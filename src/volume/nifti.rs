@@ -322,13 +322,23 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, VolumeError> {
     });
 
     let vox = f.f32(OFF_VOX_OFFSET);
-    if !vox.is_finite() || vox.fract() != 0.0 || f64::from(vox) < MIN_VOX_OFFSET as f64 {
+    // Up to 2^53 bytes (8 PiB): no file reaches it, and the offset stays
+    // exact in the messages that print it.
+    const MAX_VOX_OFFSET: f64 = 9_007_199_254_740_992.0;
+    let v = f64::from(vox);
+    if !vox.is_finite()
+        || vox.fract() != 0.0
+        || !(MIN_VOX_OFFSET as f64..=MAX_VOX_OFFSET).contains(&v)
+    {
         return Err(VolumeError::format(
             path,
-            format!("vox_offset is {vox}, expected a whole number of at least {MIN_VOX_OFFSET}"),
+            format!(
+                "vox_offset is {}, expected a whole number from {MIN_VOX_OFFSET} to 2^53",
+                crate::human::exact(v)
+            ),
         ));
     }
-    let vox_offset = vox as u64; // whole, finite and >= 352: exact
+    let vox_offset = vox as u64; // whole, finite and in range: exact
 
     let slope = f64::from(f.f32(OFF_SCL_SLOPE));
     let inter = f64::from(f.f32(OFF_SCL_INTER));
@@ -556,7 +566,7 @@ mod tests {
             0.0,
         );
         assert_eq!(parse_header(p, &b).unwrap().dims, [4, 4, 4]);
-        for vox in [348.0, 352.5, f32::NAN, -1.0] {
+        for vox in [348.0, 352.5, f32::NAN, -1.0, 1e30] {
             let b = header_bytes(
                 Endian::Little,
                 [3, 1, 1, 1, 1, 1, 1, 1],
@@ -568,6 +578,17 @@ mod tests {
             );
             assert!(parse_header(p, &b).is_err(), "vox_offset {vox}");
         }
+        let b = header_bytes(
+            Endian::Little,
+            [3, 1, 1, 1, 1, 1, 1, 1],
+            2,
+            [1.0; 8],
+            1e30,
+            0.0,
+            0.0,
+        );
+        let e = parse_header(p, &b).unwrap_err().to_string();
+        assert!(e.contains("vox_offset is 1.0000000150474662e30"), "{e}");
         for code in [128i16, 32, 1024, 0, 3] {
             let b = header_bytes(
                 Endian::Little,
