@@ -559,6 +559,14 @@ fn bad_inputs_fail_cleanly_without_output() {
             b"not gzip data",
         ),
     );
+    // Shorter than gzip's header: once read as no data at all.
+    t.write(
+        "gz8.nrrd",
+        &nrrd(
+            &format!("{u8_3}\nsizes: 2 2 2\nencoding: gzip\n"),
+            b"notgzip!",
+        ),
+    );
     t.write(
         "d4.nrrd",
         &nrrd(
@@ -722,6 +730,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("file", "NRRD: an axis of size 0", "info zero.nrrd", &["zero.nrrd"]),
         bad("file", "NRRD: sizes over the memory limit", "info huge.nrrd", &["huge.nrrd", "limit"]),
         bad("file", "NRRD: gzip encoding, data not gzip", "info gz.nrrd", &["gz.nrrd", "gzip"]),
+        bad("file", "NRRD: gzip encoding, 8 bytes not gzip", "info gz8.nrrd", &["gz8.nrrd", "gzip data is corrupt", "magic bytes"]),
         bad("file", "NRRD: 4-D data", "info d4.nrrd", &["d4.nrrd", "4-D"]),
         bad("file", "NHDR: data file missing", "info det.nhdr", &["det.nhdr", "nothere.raw"]),
         bad("file", "NRRD: NaN in float data", "info nan.nrrd", &["nan.nrrd", "NaN", "--allow-nan"]),
@@ -1199,6 +1208,17 @@ fn image_over_the_memory_limit_is_refused() {
     let o = render(&png, &hits, "32");
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(png.exists() && hits.exists());
+    // 256² pixels (6.4 MiB) fit alone, and so does the phantom, but not
+    // both: the volume gets what the image leaves.
+    let (png, hits) = (t.path("both.png"), t.path("both.exr"));
+    assert_fails(
+        &render(&png, &hits, "256"),
+        &[
+            "64x64x64 volume needs about 4.2 MiB",
+            "the memory limit of 8.0 MiB less the 6.4 MiB the 256x256 image takes",
+        ],
+    );
+    assert!(!png.exists() && !hits.exists());
 }
 
 /// Separate processes with 1 and 2 worker threads, and with another tile
@@ -1607,6 +1627,51 @@ fn region_parts_merge_to_the_whole_frame() {
         .unwrap();
     assert_fails(&o, &["no R, G, B channels"]);
     assert!(!out.exists() && !t.path("bad.png").exists());
+    // A part of another frame (another ior) is refused, naming both parts;
+    // one rendered with another tile size and thread count is the same
+    // frame's.
+    let other = |name: &str, sets: &[&str]| {
+        let mut cmd = bin();
+        cmd.args(["render", sphere, "-q", "--set", "image.width=96"])
+            .args(["--set", "image.height=80", "--region", "0,50,96,80"])
+            .args(["--set", "render.traversal=octree", "--set"])
+            .arg("render.supersampling=prss")
+            .arg("-o")
+            .arg(t.path(&format!("{name}.png")))
+            .arg("--hits")
+            .arg(t.path(&format!("{name}.exr")))
+            .args(sets);
+        assert!(cmd.output().unwrap().status.success());
+        t.path(&format!("{name}.exr"))
+    };
+    let glass = other("ior", &["--set", "surface.ior=1.3"]);
+    let o = bin()
+        .arg("merge")
+        .arg(part(0))
+        .arg(part(1))
+        .arg(&glass)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert_fails(
+        &o,
+        &[
+            "part0-0-hits.exr and",
+            "ior.exr are parts of different frames",
+        ],
+    );
+    let retiled = other("tiled", &["--set", "render.tile=8", "--threads", "1"]);
+    let o = bin()
+        .arg("merge")
+        .arg(part(0))
+        .arg(part(1))
+        .arg(&retiled)
+        .arg("-o")
+        .arg(&out)
+        .output()
+        .unwrap();
+    assert!(o.status.success(), "{}", stderr(&o));
     let o = bin()
         .args(["render", sphere, "-o"])
         .arg(t.path("r.png"))

@@ -104,10 +104,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let tiles = render::tile_count(&scene, window);
     // The tile scratch of every worker thread that can have a tile, now that
     // their count is known.
-    scene.check_memory(
-        snell::volume::limits::default_memory_limit(),
-        pool.current_num_threads().min(tiles.max(1)),
-    )?;
+    let limit = snell::volume::limits::default_memory_limit();
+    let workers = pool.current_num_threads().min(tiles.max(1));
+    scene.check_memory(limit, workers)?;
+    // The volume and its structures get what the image leaves of the limit:
+    // each could pass alone where both together exceed it.
+    let (frame_bytes, scratch_bytes) = scene.memory_need(workers);
+    let image_bytes = frame_bytes.saturating_add(scratch_bytes);
+    let load = LoadOptions {
+        memory_limit: limit.saturating_sub(image_bytes),
+        ..LoadOptions::default()
+    };
     if a.orbit.is_some() {
         // Each frame reuses the memory of the last, as an interactive
         // session's would.
@@ -118,16 +125,35 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let prep_start = Instant::now();
     // A 1024³ scan spends half a minute here before its first tile.
     let preparing = Step::named("preparing the volume (load, prefilter, cell tags)");
+    // A volume refused for the memory the image leaves says so.
+    let over_limit = |e: snell::scene::SceneError| -> anyhow::Error {
+        let text = e.to_string();
+        if image_bytes > 0 && text.contains("over the limit of") {
+            let hb = snell::volume::limits::human_bytes;
+            anyhow::anyhow!(
+                "{text}; that is the memory limit of {} less the {} the {}x{} image takes",
+                hb(limit),
+                hb(image_bytes),
+                scene.width,
+                scene.height
+            )
+        } else {
+            e.into()
+        }
+    };
     let (prep, cache_warnings) = progress::watch(&preparing, a.quiet, || -> anyhow::Result<_> {
         Ok(match &a.cache {
             Some(dir) => {
                 let mut cache = snell::prepare::Cache::with_dir(dir)
                     .with_context(|| format!("cache directory {}", dir.display()))?;
-                let prep = pool.install(|| cache.prepare(&scene, &LoadOptions::default()))?;
+                let prep = pool
+                    .install(|| cache.prepare(&scene, &load))
+                    .map_err(over_limit)?;
                 (prep, cache.warnings)
             }
             None => (
-                pool.install(|| Prepared::for_scene(&scene, &LoadOptions::default()))?,
+                pool.install(|| Prepared::for_scene(&scene, &load))
+                    .map_err(over_limit)?,
                 Vec::new(),
             ),
         })
@@ -155,6 +181,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         window,
         tiles,
         quiet: a.quiet,
+        // Only the parts of a frame need to say which frame they are.
+        volume_hash: window.map(|_| prep.volume.content_hash()),
     };
     match a.orbit {
         None => render_one(&a, &scene, &renderer, &outputs, trace)?,
@@ -172,11 +200,20 @@ struct Renderer<'a> {
     window: Option<render::tile::Tile>,
     tiles: usize,
     quiet: bool,
+    /// The volume's content hash, for the frame fingerprint a `--region`
+    /// part's EXR files carry.
+    volume_hash: Option<u64>,
 }
 
 impl Renderer<'_> {
     /// One frame of `scene`, in the pool (so --threads sets its tile
     /// workers), its progress shown ([`progress::watch`]).
+    /// The fingerprint of `scene`'s frame, for a `--region` part's EXR
+    /// files (none for a whole frame).
+    fn frame_id(&self, scene: &Scene) -> Option<u64> {
+        self.volume_hash.map(|h| scene.frame_fingerprint(h))
+    }
+
     fn frame(&self, scene: &Scene, trace: Option<&mut render::Trace>) -> render::Frame {
         let done = AtomicUsize::new(0);
         let step = Step {
@@ -206,7 +243,7 @@ fn render_one(
     mut trace: Option<render::Trace>,
 ) -> anyhow::Result<()> {
     let frame = renderer.frame(scene, trace.as_mut());
-    outputs.write(&frame, None)?;
+    outputs.write(&frame, None, renderer.frame_id(scene))?;
     if let Some(p) = &a.stats {
         write_stats(p, &stats_json(a, scene, &frame.stats)?)?;
     }
@@ -238,7 +275,7 @@ fn render_orbit(
         let start = Instant::now();
         let frame = renderer.frame(&scene, None);
         let ms = start.elapsed().as_secs_f64() * 1e3;
-        outputs.write(&frame, Some(k))?;
+        outputs.write(&frame, Some(k), renderer.frame_id(&scene))?;
         held.commit()?;
         if !a.quiet {
             eprintln!(
@@ -445,14 +482,15 @@ impl Outputs {
             .chain(self.exr.as_ref())
     }
 
-    /// Writes frame `k`'s images (the one frame's without `--orbit`).
-    fn write(&self, frame: &render::Frame, k: Option<u32>) -> anyhow::Result<()> {
+    /// Writes frame `k`'s images (the one frame's without `--orbit`), its
+    /// EXR files carrying the frame fingerprint `id` (a part's).
+    fn write(&self, frame: &render::Frame, k: Option<u32>, id: Option<u64>) -> anyhow::Result<()> {
         frame.film.write_png(&self.png.name(k))?;
         if let Some(h) = &self.hits {
-            frame.film.write_hits_exr(&h.name(k))?;
+            frame.film.write_hits_exr(&h.name(k), id)?;
         }
         if let Some(e) = &self.exr {
-            frame.film.write_color_exr(&e.name(k))?;
+            frame.film.write_color_exr(&e.name(k), id)?;
         }
         Ok(())
     }

@@ -8,7 +8,7 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{FilmError, Placement, to_u8, write_exr_placed, write_png_rgb};
+use super::{FRAME_ATTRIBUTE, FilmError, Placement, to_u8, write_exr_placed, write_png_rgb};
 
 /// One part as read: where it sits and its channels (sorted by name).
 #[derive(Clone, Debug)]
@@ -26,6 +26,8 @@ pub struct Merged {
     pub width: u32,
     pub height: u32,
     pub channels: Vec<(String, Vec<f32>)>,
+    /// The parts' frame ([`Placement::frame`]), kept in the merged EXR.
+    pub frame: Option<u64>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -36,6 +38,16 @@ pub enum MergeError {
     NoParts,
     #[error("{path}: {msg}")]
     Part { path: PathBuf, msg: String },
+    #[error(
+        "{a} and {b} are parts of different frames (scene settings or volume differ: frame {} against {}); render every part from the same scene and volume",
+        frame_name(*.a_frame), frame_name(*.b_frame)
+    )]
+    OtherFrame {
+        a: PathBuf,
+        a_frame: Option<u64>,
+        b: PathBuf,
+        b_frame: Option<u64>,
+    },
     #[error("{a} and {b} both cover pixel ({x}, {y})")]
     Overlap {
         a: PathBuf,
@@ -62,6 +74,14 @@ pub enum MergeError {
         bytes: u64,
         limit: u64,
     },
+}
+
+/// A frame fingerprint as a message names it.
+fn frame_name(frame: Option<u64>) -> String {
+    match frame {
+        Some(f) => format!("{f:016x}"),
+        None => "unnamed (not written by snell render --region)".into(),
+    }
 }
 
 /// Reads one part.
@@ -101,6 +121,23 @@ pub fn read_part(path: &Path) -> Result<Part, MergeError> {
         .map(|c| (c.name.to_string(), c.sample_data.values_as_f32().collect()))
         .collect();
     channels.sort_by(|a, b| a.0.cmp(&b.0));
+    let frame = match layer
+        .attributes
+        .other
+        .get(&exr::prelude::Text::from(FRAME_ATTRIBUTE))
+    {
+        None => None,
+        Some(exr::prelude::AttributeValue::Text(t)) => {
+            Some(u64::from_str_radix(&t.to_string(), 16).map_err(|_| {
+                bad(format!(
+                    "its {FRAME_ATTRIBUTE} attribute '{t}' is not a frame fingerprint"
+                ))
+            })?)
+        }
+        Some(_) => {
+            return Err(bad(format!("its {FRAME_ATTRIBUTE} attribute is not text")));
+        }
+    };
     Ok(Part {
         path: path.to_path_buf(),
         width: w as u32,
@@ -108,6 +145,7 @@ pub fn read_part(path: &Path) -> Result<Part, MergeError> {
         at: Placement {
             origin: [pos.0 as u32, pos.1 as u32],
             full: [full_w as u32, full_h as u32],
+            frame,
         },
         channels,
     })
@@ -132,6 +170,14 @@ pub fn merge(parts: &[Part], memory_limit: u64) -> Result<Merged, MergeError> {
                 first.at.full[0],
                 first.at.full[1]
             )));
+        }
+        if p.at.frame != first.at.frame {
+            return Err(MergeError::OtherFrame {
+                a: first.path.clone(),
+                a_frame: first.at.frame,
+                b: p.path.clone(),
+                b_frame: p.at.frame,
+            });
         }
         let theirs: Vec<&str> = p.channels.iter().map(|c| c.0.as_str()).collect();
         if theirs != names {
@@ -197,6 +243,7 @@ pub fn merge(parts: &[Part], memory_limit: u64) -> Result<Merged, MergeError> {
         width,
         height,
         channels,
+        frame: first.at.frame,
     })
 }
 
@@ -206,6 +253,7 @@ impl Merged {
         let whole = Placement {
             origin: [0, 0],
             full: [self.width, self.height],
+            frame: self.frame,
         };
         let channels = self
             .channels
@@ -250,7 +298,11 @@ mod tests {
             path: PathBuf::from(name),
             width: w,
             height: h,
-            at: Placement { origin, full },
+            at: Placement {
+                origin,
+                full,
+                frame: None,
+            },
             channels: vec![(
                 "v".into(),
                 (0..n)

@@ -19,8 +19,8 @@ use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
 
 use exr::prelude::{
-    AnyChannel, AnyChannels, Encoding, FlatSamples, Image, ImageAttributes, IntegerBounds, Layer,
-    LayerAttributes, SmallVec, Vec2, WritableImage,
+    AnyChannel, AnyChannels, AttributeValue, Encoding, FlatSamples, Image, ImageAttributes,
+    IntegerBounds, Layer, LayerAttributes, SmallVec, Text, Vec2, WritableImage,
 };
 
 use crate::atomic::write_atomic;
@@ -381,11 +381,13 @@ impl Film {
             .collect()
     }
 
-    /// The film's place in the image, for its EXR files.
-    fn placement(&self) -> Placement {
+    /// The film's place in the image, for its EXR files: in the frame
+    /// `frame`, when given ([`Placement::frame`]).
+    fn placement(&self, frame: Option<u64>) -> Placement {
         Placement {
             origin: self.origin,
             full: self.full,
+            frame,
         }
     }
 
@@ -405,25 +407,27 @@ impl Film {
         write_png_rgb(path, self.width, self.height, &bytes)
     }
 
-    /// Float RGB EXR of the colour image.
-    pub fn write_color_exr(&self, path: &Path) -> Result<(), FilmError> {
+    /// Float RGB EXR of the colour image (of the frame `frame`, when given:
+    /// [`Placement::frame`]).
+    pub fn write_color_exr(&self, path: &Path, frame: Option<u64>) -> Result<(), FilmError> {
         let c = |k: usize| self.color.iter().map(|p| p[k]).collect::<Vec<f32>>();
         write_exr_placed(
             path,
             self.width,
             self.height,
-            self.placement(),
+            self.placement(frame),
             vec![("R", c(0)), ("G", c(1)), ("B", c(2))],
         )
     }
 
-    /// The SPEC.md hit-position EXR.
-    pub fn write_hits_exr(&self, path: &Path) -> Result<(), FilmError> {
+    /// The SPEC.md hit-position EXR (of the frame `frame`, when given:
+    /// [`Placement::frame`]).
+    pub fn write_hits_exr(&self, path: &Path, frame: Option<u64>) -> Result<(), FilmError> {
         write_exr_placed(
             path,
             self.width,
             self.height,
-            self.placement(),
+            self.placement(frame),
             vec![
                 ("u", self.u.clone()),
                 ("v", self.v.clone()),
@@ -439,7 +443,14 @@ impl Film {
 pub struct Placement {
     pub origin: [u32; 2],
     pub full: [u32; 2],
+    /// The frame a part belongs to ([`crate::scene::Scene::frame_fingerprint`]),
+    /// written as the layer attribute [`FRAME_ATTRIBUTE`] (in hexadecimal),
+    /// so that `snell merge` refuses parts of different frames.
+    pub frame: Option<u64>,
 }
+
+/// The EXR layer attribute that names a part's frame ([`Placement::frame`]).
+pub const FRAME_ATTRIBUTE: &str = "snellFrame";
 
 impl HitImage {
     pub fn write_exr(&self, path: &Path) -> Result<(), FilmError> {
@@ -533,6 +544,7 @@ pub fn write_exr_channels(
     let whole = Placement {
         origin: [0, 0],
         full: [width, height],
+        frame: None,
     };
     write_exr_placed(path, width, height, whole, channels)
 }
@@ -552,6 +564,12 @@ pub fn write_exr_placed(
         .collect();
     let mut attributes = LayerAttributes::named("snell");
     attributes.layer_position = Vec2(at.origin[0] as i32, at.origin[1] as i32);
+    if let Some(frame) = at.frame {
+        attributes.other.insert(
+            Text::from(FRAME_ATTRIBUTE),
+            AttributeValue::Text(Text::from(format!("{frame:016x}").as_str())),
+        );
+    }
     let layer = Layer::new(
         (width as usize, height as usize),
         attributes,
@@ -713,7 +731,7 @@ mod tests {
         f.v = vec![1.0, f32::NAN, 2.0, -1e-6, 0.0, 7.0];
         f.events = vec![2.0, 32.0, 0.0, 4.0, 0.0, 1.0];
         let p = dir.join("hits.exr");
-        f.write_hits_exr(&p).unwrap();
+        f.write_hits_exr(&p, None).unwrap();
         let h = HitImage::read_exr(&p).unwrap();
         assert_eq!((h.width, h.height), (3, 2));
         assert_eq!(h.events, f.events);

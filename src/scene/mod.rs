@@ -396,6 +396,61 @@ impl Scene {
     }
 }
 
+impl Scene {
+    /// A fingerprint of the frame this scene renders from a volume whose
+    /// [`Volume::content_hash`] is `volume_hash`: its image size, camera,
+    /// surface, backdrop (a photograph by its pixels), render settings and
+    /// the volume's samples and spacing; not the scene's
+    /// or the volume's file names (each machine of a split render may read
+    /// them from its own path), nor the tile size (the pixels do not depend
+    /// on it). The parts of one frame (`render --region`) carry it, and
+    /// `snell merge` refuses parts whose fingerprints differ.
+    pub fn frame_fingerprint(&self, volume_hash: u64) -> u64 {
+        let b = &self.backdrop;
+        let pattern = match &b.pattern {
+            Pattern::Checker { .. } => format!("{:?}", b.pattern),
+            Pattern::Image(t) => {
+                let mut h = crate::volume::WordHash::new();
+                for p in &t.pixels {
+                    h.add(u64::from(p[0].to_bits()) | u64::from(p[1].to_bits()) << 32);
+                    h.add(u64::from(p[2].to_bits()));
+                }
+                format!(
+                    "image {}x{} {:?} {:?} {:x}",
+                    t.width_px,
+                    t.height_px,
+                    t.world_width,
+                    t.outside,
+                    h.value()
+                )
+            }
+        };
+        let mut render = self.render;
+        render.tile = 0;
+        let text = format!(
+            "{}x{} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {pattern} {:?}",
+            self.width,
+            self.height,
+            self.background,
+            self.camera,
+            self.spacing,
+            self.surface,
+            b.center,
+            b.normal,
+            b.u_axis,
+            render
+        );
+        let mut h = crate::volume::WordHash::new();
+        h.add(volume_hash);
+        for word in text.as_bytes().chunks(8) {
+            let mut w = [0u8; 8];
+            w[..word.len()].copy_from_slice(word);
+            h.add(u64::from_le_bytes(w));
+        }
+        h.value()
+    }
+}
+
 /// `v` divided by its largest absolute component (zero and non-finite
 /// vectors unchanged): the same direction, with a length from 1 to √3.
 pub(crate) fn unit_scale(v: DVec3) -> DVec3 {

@@ -234,6 +234,18 @@ pub(super) fn gzip_region<R: BufRead>(
         msg: format!("{need} bytes of data do not fit in memory"),
     })?;
 
+    // A stream too short for gzip's header reads as empty, not as corrupt:
+    // bytes that are not gzip at all are named as such.
+    let head = src.fill_buf().map_err(|e| VolumeError::io(path, e))?;
+    if !head.is_empty() && !head.starts_with(&[0x1f, 0x8b]) && head != [0x1f] {
+        return Err(gzip_error(
+            path,
+            io::Error::new(
+                io::ErrorKind::InvalidData,
+                "it does not start with gzip's magic bytes 1f 8b",
+            ),
+        ));
+    }
     let mut dec = GzMembers::new(src);
     let skipped = skip_bytes(&mut dec, byte_skip).map_err(|e| gzip_error(path, e))?;
     if skipped < byte_skip {
