@@ -24,7 +24,8 @@ use clap::{Parser, Subcommand};
     long_about = "snell ray-traces light refracting through an iso-surface of a sampled 3-D volume \
 (CT, MRI, phantoms) onto a planar backdrop. Reconstruction by trilinear, Catmull-Rom, \
 interpolating B-splines (degree 2..7) or the smoothing cubic B-spline; exact crossings per cell; \
-DDA and octree traversal over classified cells; supersampling and PRSS."
+fixed-step ray casting, DDA, octree and distance-map traversal over classified cells; \
+supersampling, PRSS and footprint filtering."
 )]
 pub struct Cli {
     #[command(subcommand)]

@@ -53,7 +53,7 @@ pub const PREFILTERED_NAMES: [&str; 7] = [
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum FilterError {
     #[error(
-        "unknown filter '{0}' (expected one of: linear, catmull-rom, bspline2 .. bspline7, smooth-bspline3)"
+        "unknown filter '{0}' (expected one of: linear (or trilinear, bspline1), catmull-rom, bspline2 .. bspline7, smooth-bspline3)"
     )]
     Unknown(String),
     #[error(

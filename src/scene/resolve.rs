@@ -523,7 +523,7 @@ pub(super) fn resolve(
                 return Err(bad(
                     "render.classify",
                     format!(
-                        "unknown or non-conservative method '{name}' (none, bmcc, accc, accc2, accc4, accc8, bezier)"
+                        "unknown or non-conservative method '{name}' (none, bmcc, accc, accc2, accc4, accc8, bezier (= bezier2), bezier0, bezier1, bezier3)"
                     ),
                 ));
             }
@@ -532,7 +532,7 @@ pub(super) fn resolve(
     if matches!(r.traversal, Traversal::Octree | Traversal::Distance) && classify.is_none() {
         return Err(bad(
             "render.classify",
-            "the octree is built over classified cells: use bmcc, accc or bezier".into(),
+            "the octree is built over classified cells: use bmcc, accc, accc2, accc4, accc8 or bezier (bezier0 .. bezier3)".into(),
         ));
     }
     if r.traversal == Traversal::Step && classify.is_some() {
