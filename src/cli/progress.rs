@@ -243,17 +243,22 @@ mod tests {
         );
     }
 
-    #[test]
-    fn log_lines_say_the_share_done_and_the_time_left() {
-        let done = AtomicUsize::new(0);
-        let step = Step {
+    /// A render's step of 400 tiles, `done` of them done.
+    fn rendering(done: &AtomicUsize) -> Step<'_> {
+        Step {
             what: "rendering".into(),
             count: Some(Count {
-                done: &done,
+                done,
                 total: 400,
                 unit: "tiles",
             }),
-        };
+        }
+    }
+
+    #[test]
+    fn log_lines_say_the_share_done_and_the_time_left() {
+        let done = AtomicUsize::new(0);
+        let step = rendering(&done);
         assert_eq!(
             step.line(Duration::from_secs(30)),
             "rendering: 0 of 400 tiles (0%), 30 s so far"
@@ -309,14 +314,7 @@ mod tests {
     #[test]
     fn the_bar_says_the_time_left_as_the_log_lines_do() {
         let done = AtomicUsize::new(0);
-        let step = Step {
-            what: "rendering".into(),
-            count: Some(Count {
-                done: &done,
-                total: 400,
-                unit: "tiles",
-            }),
-        };
+        let step = rendering(&done);
         let screen = Screen::default();
         let bar = step.bar(Duration::from_secs(30));
         bar.set_draw_target(indicatif::ProgressDrawTarget::term_like(Box::new(

@@ -206,14 +206,14 @@ struct Renderer<'a> {
 }
 
 impl Renderer<'_> {
-    /// One frame of `scene`, in the pool (so --threads sets its tile
-    /// workers), its progress shown ([`progress::watch`]).
     /// The fingerprint of `scene`'s frame, for a `--region` part's EXR
     /// files (none for a whole frame).
     fn frame_id(&self, scene: &Scene) -> Option<u64> {
         self.volume_hash.map(|h| scene.frame_fingerprint(h))
     }
 
+    /// One frame of `scene`, in the pool (so --threads sets its tile
+    /// workers), its progress shown ([`progress::watch`]).
     fn frame(&self, scene: &Scene, trace: Option<&mut render::Trace>) -> render::Frame {
         let done = AtomicUsize::new(0);
         let step = Step {
