@@ -608,7 +608,11 @@ fn check_color(c: &[f32; 3]) -> Result<(), String> {
     if c.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
-        Err(format!("colour {c:?} must be finite"))
+        // Colours are f32: a component beyond ±3.4e38 was read as infinite.
+        Err(format!(
+            "colour components must be finite numbers within ±{:e}; read as {c:?}",
+            f32::MAX
+        ))
     }
 }
 
