@@ -455,6 +455,12 @@ impl Cache {
                 "exists and is not a directory",
             ));
         }
+        if !dir.exists() && std::fs::symlink_metadata(dir).is_ok() {
+            return Err(std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "is a symbolic link that leads to no directory (dangling, or a loop)",
+            ));
+        }
         if !dir.exists() {
             let parent = dir.parent().filter(|p| !p.as_os_str().is_empty());
             if let Some(p) = parent.filter(|p| !p.is_dir()) {
@@ -794,6 +800,19 @@ mod tests {
         let e = Cache::with_dir(&deep).err().unwrap().to_string();
         assert!(e.contains("parent") && e.contains("typo"), "{e}");
         assert!(!root.join("typo").exists());
+        // A link in a loop, or to nothing, is named as such.
+        #[cfg(unix)]
+        for (link, to) in [("a", "b"), ("b", "a"), ("gone", "nothing")] {
+            std::os::unix::fs::symlink(root.join(to), root.join(link)).unwrap();
+        }
+        #[cfg(unix)]
+        for link in ["a", "gone"] {
+            let e = Cache::with_dir(&root.join(link)).err().unwrap().to_string();
+            assert!(
+                e.contains("symbolic link that leads to no directory"),
+                "{e}"
+            );
+        }
         std::fs::remove_dir_all(&root).unwrap();
     }
 
