@@ -131,15 +131,37 @@ pub fn check_target(path: &Path) -> io::Result<()> {
     }
 }
 
-/// Creates and removes a temporary file beside `path`: a command checks at
+/// Creates and removes a temporary file where [`write_atomic`] will write
+/// `path`'s (beside the file a symbolic link names): a command checks at
 /// its start that it will be able to write its output, not after its work.
 pub fn check_writable(path: &Path) -> io::Result<()> {
-    let probe = temp_path(path)?;
-    fs::OpenOptions::new()
+    let probe = temp_path(&written_path(path))?;
+    {
+        let mut p = pending();
+        if p.closing {
+            return Err(io::Error::new(io::ErrorKind::Interrupted, "interrupted"));
+        }
+        p.live.push(probe.clone());
+    }
+    let made = fs::OpenOptions::new()
         .write(true)
         .create_new(true)
-        .open(&probe)?;
-    fs::remove_file(&probe)
+        .open(&probe)
+        .and_then(|_| fs::remove_file(&probe));
+    pending().live.retain(|l| *l != probe);
+    made
+}
+
+/// The file a write of `path` replaces: through a symbolic link to the
+/// file it names, as other tools write, rather than replacing the link (a
+/// dangling link is replaced by the file).
+fn written_path(path: &Path) -> PathBuf {
+    match fs::symlink_metadata(path) {
+        Ok(m) if m.file_type().is_symlink() => {
+            fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+        }
+        _ => path.to_path_buf(),
+    }
 }
 
 /// Writes `path` through `write`, atomically.
@@ -147,20 +169,9 @@ pub fn write_atomic(
     path: &Path,
     write: impl FnOnce(&mut BufWriter<File>) -> io::Result<()>,
 ) -> io::Result<()> {
-    // Through a symbolic link to the file it names, as other tools write,
-    // rather than replacing the link; never over a device, FIFO or socket,
-    // which the rename would replace by a plain file.
-    let linked;
-    let path = match fs::symlink_metadata(path) {
-        Ok(m) if m.file_type().is_symlink() => match fs::canonicalize(path) {
-            Ok(target) => {
-                linked = target;
-                linked.as_path()
-            }
-            Err(_) => path, // a dangling link: replaced by the file
-        },
-        _ => path,
-    };
+    // Never over a device, FIFO or socket, which the rename would replace
+    // by a plain file.
+    let path = &written_path(path);
     check_target(path)?;
     let tmp = temp_path(path)?;
     let file = {

@@ -1628,8 +1628,8 @@ fn region_parts_merge_to_the_whole_frame() {
     assert_fails(&o, &["no R, G, B channels"]);
     assert!(!out.exists() && !t.path("bad.png").exists());
     // A part of another frame (another ior) is refused, naming both parts;
-    // one rendered with another tile size and thread count is the same
-    // frame's.
+    // one rendered with another tile size and thread count, a walk shortcut
+    // off and an ignored step is the same frame's.
     let other = |name: &str, sets: &[&str]| {
         let mut cmd = bin();
         cmd.args(["render", sphere, "-q", "--set", "image.width=96"])
@@ -1661,7 +1661,19 @@ fn region_parts_merge_to_the_whole_frame() {
             "ior.exr are parts of different frames",
         ],
     );
-    let retiled = other("tiled", &["--set", "render.tile=8", "--threads", "1"]);
+    let retiled = other(
+        "tiled",
+        &[
+            "--set",
+            "render.tile=8",
+            "--threads",
+            "1",
+            "--set",
+            "render.clear_crossing_cells=false",
+            "--set",
+            "render.step=0.5",
+        ],
+    );
     let o = bin()
         .arg("merge")
         .arg(part(0))
@@ -1865,8 +1877,9 @@ fn an_unwritable_output_is_refused_before_the_work() {
 }
 
 /// Interrupted while its outputs are being written (Ctrl-C, SIGTERM), a
-/// render exits 130 and leaves no temporary file; its outputs appear all
-/// together or not at all.
+/// render leaves no temporary file and ends by the signal, as the shell
+/// expects of an interrupted command; its outputs appear all together or
+/// not at all. A signal it was started to ignore (`nohup`) stays ignored.
 #[test]
 fn an_interrupted_render_leaves_no_debris() {
     for signal in [libc::SIGINT, libc::SIGTERM] {
@@ -1908,9 +1921,28 @@ fn an_interrupted_render_leaves_no_debris() {
         }
         let o = child.wait_with_output().unwrap();
         assert!(writing, "the render ended before its outputs were begun");
-        assert_eq!(o.status.code(), Some(130), "{}", stderr(&o));
+        use std::os::unix::process::ExitStatusExt;
+        assert_eq!(o.status.signal(), Some(signal), "{}", stderr(&o));
         assert!(stderr(&o).contains("interrupted"), "{}", stderr(&o));
         let left: Vec<PathBuf> = listing(&t.0).into_iter().map(|(p, _)| p).collect();
         assert!(left.is_empty(), "{left:?}");
     }
+    // Under nohup (SIGHUP ignored from the start) the hang-up is ignored.
+    let t = Tmp::new("nohup");
+    let mut child = Command::new("nohup")
+        .arg(env!("CARGO_BIN_EXE_snell"))
+        .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
+        .arg(t.path("o.png"))
+        .args(["--set", "image.width=1024", "--set", "image.height=1024"])
+        .current_dir(&t.0)
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::null())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(100));
+    // SAFETY: signalling our own child process.
+    unsafe { libc::kill(child.id() as i32, libc::SIGHUP) };
+    let status = child.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    assert!(t.path("o.png").exists());
 }

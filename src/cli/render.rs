@@ -108,8 +108,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let workers = pool.current_num_threads().min(tiles.max(1));
     scene.check_memory(limit, workers)?;
     // The volume and its structures get what the image leaves of the limit:
-    // each could pass alone where both together exceed it.
-    let (frame_bytes, scratch_bytes) = scene.memory_need(workers);
+    // each could pass alone where both together exceed it. A part holds
+    // its window (and apron) only.
+    let (frame_bytes, scratch_bytes) =
+        scene.memory_need_of(render::traced_pixels(&scene, window), workers);
     let image_bytes = frame_bytes.saturating_add(scratch_bytes);
     let load = LoadOptions {
         memory_limit: limit.saturating_sub(image_bytes),
@@ -131,11 +133,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         if image_bytes > 0 && text.contains("over the limit of") {
             let hb = snell::volume::limits::human_bytes;
             anyhow::anyhow!(
-                "{text}; that is the memory limit of {} less the {} the {}x{} image takes",
+                "{text}; that is the memory limit of {} less the {} the {} takes",
                 hb(limit),
                 hb(image_bytes),
-                scene.width,
-                scene.height
+                match window {
+                    None => format!("{}x{} image", scene.width, scene.height),
+                    Some(w) => format!("{}x{} region", w.width(), w.height()),
+                }
             )
         } else {
             e.into()
@@ -185,11 +189,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         volume_hash: window.map(|_| prep.volume.content_hash()),
     };
     match a.orbit {
-        None => render_one(&a, &scene, &renderer, &outputs, trace)?,
-        Some(n) => render_orbit(&a, scene, &renderer, &outputs, n, &held)?,
+        None => render_one(&a, &scene, &renderer, &outputs, trace, &held),
+        Some(n) => render_orbit(&a, scene, &renderer, &outputs, n, &held),
     }
-    held.commit()?;
-    Ok(())
 }
 
 /// What every frame of a run shares: the worker pool, the preparation, and
@@ -234,13 +236,16 @@ impl Renderer<'_> {
     }
 }
 
-/// The scene's one frame, its files, stats and timeline.
+/// The scene's one frame, its files, stats and timeline, committed
+/// together (`held`) before anything more is printed: a closed stderr ends
+/// the process on its next line (SIGPIPE), and must not take them along.
 fn render_one(
     a: &Args,
     scene: &Scene,
     renderer: &Renderer,
     outputs: &Outputs,
     mut trace: Option<render::Trace>,
+    held: &snell::atomic::Held,
 ) -> anyhow::Result<()> {
     let frame = renderer.frame(scene, trace.as_mut());
     outputs.write(&frame, None, renderer.frame_id(scene))?;
@@ -250,6 +255,7 @@ fn render_one(
     if let (Some(p), Some(t)) = (&a.trace, &trace) {
         t.write(p).with_context(|| p.display().to_string())?;
     }
+    held.commit()?;
     warn_undefined(&frame, None);
     if !a.quiet {
         print_table(&frame.stats);
@@ -302,6 +308,7 @@ fn render_orbit(
         });
         write_stats(p, &j)?;
     }
+    held.commit()?;
     if !a.quiet {
         eprintln!(
             "{n} frames: median {median:.1} ms (min {min:.1}, max {max:.1}), {:.1} frames a second, writing the files not included; the median frame:",

@@ -67,14 +67,15 @@ fn parse_points(reader: impl BufRead, name: &str, limit: u64) -> anyhow::Result<
     let mut raw = Vec::new();
     for n in 0.. {
         raw.clear();
+        // The line and its newline, or one byte past the cap.
         let read = (&mut reader)
-            .take(MAX_LINE as u64 + 1)
+            .take(MAX_LINE as u64 + 2)
             .read_until(b'\n', &mut raw)
             .with_context(|| format!("{name}: read error at line {}", n + 1))?;
         if read == 0 {
             break;
         }
-        if raw.len() > MAX_LINE {
+        if raw.strip_suffix(b"\n").unwrap_or(&raw).len() > MAX_LINE {
             bail!(
                 "{name}: line {} is longer than {MAX_LINE} bytes; expected one point x,y,z per line",
                 n + 1
@@ -101,7 +102,13 @@ fn parse_points(reader: impl BufRead, name: &str, limit: u64) -> anyhow::Result<
             Some(v)
                 if (v.len() == 3 || v.len() == columns) && v[..3].iter().all(|x| x.is_finite()) =>
             {
-                if (out.len() as u64 + 1) * POINT_BYTES > limit {
+                // The memory the list holds once it grows to take this point.
+                let holds = if out.len() == out.capacity() {
+                    (out.capacity() * 2).max(4)
+                } else {
+                    out.capacity()
+                };
+                if holds as u64 * POINT_BYTES > limit {
                     bail!(
                         "{name}: line {}: more than {} points would exceed the memory limit of {} (set --memory-limit or SNELL_MEMORY_LIMIT to raise it, or split the file)",
                         n + 1,
@@ -216,12 +223,21 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(e.contains("line 1 is longer than 4096 bytes"), "{e}");
-        let e = parse_points("1,2,3\n4,5,6\n7,8,9\n".as_bytes(), "p", 2 * POINT_BYTES)
+        let five = "1,2,3\n4,5,6\n7,8,9\n1,1,1\n2,2,2\n";
+        let e = parse_points(five.as_bytes(), "p", 4 * POINT_BYTES)
             .unwrap_err()
             .to_string();
-        assert!(e.contains("line 3: more than 2 points"), "{e}");
-        let p = parse_points("1,2,3\n4,5,6\n".as_bytes(), "p", 2 * POINT_BYTES).unwrap();
-        assert_eq!(p.len(), 2);
+        assert!(e.contains("line 5: more than 4 points"), "{e}");
+        let p = parse_points(five.as_bytes(), "p", 8 * POINT_BYTES).unwrap();
+        assert_eq!(p.len(), 5);
+        // A line of exactly the cap, with its newline, is read.
+        let long = format!("1,2,3{}\n", " ".repeat(MAX_LINE - 5));
+        assert_eq!(
+            parse_points(long.as_bytes(), "p", u64::MAX).unwrap().len(),
+            1
+        );
+        let longer = format!("1,2,3{}\n", " ".repeat(MAX_LINE - 4));
+        assert!(parse_points(longer.as_bytes(), "p", u64::MAX).is_err());
         let e = parse_points(&b"1,2,\xff\n"[..], "p", u64::MAX)
             .unwrap_err()
             .to_string();

@@ -80,7 +80,8 @@ pub enum MergeError {
 fn frame_name(frame: Option<u64>) -> String {
     match frame {
         Some(f) => format!("{f:016x}"),
-        None => "unnamed (not written by snell render --region)".into(),
+        None => "unnamed (a whole frame's file, or a part from another program or an older snell)"
+            .into(),
     }
 }
 

@@ -104,6 +104,13 @@ fn post_mode(scene: &Scene) -> Option<prss::Mode> {
     }
 }
 
+/// How many pixels a render of `window` (the whole image for `None`) holds
+/// in its film: the window and its apron ([`traced_window`]).
+pub fn traced_pixels(scene: &Scene, window: Option<tile::Tile>) -> u64 {
+    let t = traced_window(scene, window);
+    u64::from(t.width()) * u64::from(t.height())
+}
+
 /// The pixels a render of `window` traces: the window and, when a post stage
 /// reads neighbours, its apron, within the image.
 fn traced_window(scene: &Scene, window: Option<tile::Tile>) -> tile::Tile {

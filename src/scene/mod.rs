@@ -334,7 +334,12 @@ impl Scene {
     /// Memory a render needs besides the volume: frame buffers for every
     /// pixel, and one tile's ray packet per worker thread.
     pub fn memory_need(&self, threads: usize) -> (u64, u64) {
-        let pixels = self.width as u64 * self.height as u64;
+        self.memory_need_of(self.width as u64 * self.height as u64, threads)
+    }
+
+    /// [`Scene::memory_need`] of a film of `pixels` pixels (a `--region`
+    /// part's window and apron).
+    pub fn memory_need_of(&self, pixels: u64, threads: usize) -> (u64, u64) {
         let tile = self.render.tile as u64;
         let tile_rays = tile * tile * self.rays_per_pixel();
         (
@@ -400,10 +405,11 @@ impl Scene {
     /// A fingerprint of the frame this scene renders from a volume whose
     /// [`Volume::content_hash`] is `volume_hash`: its image size, camera,
     /// surface, backdrop (a photograph by its pixels), render settings and
-    /// the volume's samples and spacing; not the scene's
-    /// or the volume's file names (each machine of a split render may read
-    /// them from its own path), nor the tile size (the pixels do not depend
-    /// on it). The parts of one frame (`render --region`) carry it, and
+    /// the volume's samples and spacing; not the scene's or the volume's
+    /// file names (each machine of a split render may read them from its own
+    /// path), nor what leaves the pixels as they are: the tile size, the
+    /// walk's shortcuts, `step` with a cell traversal, and every
+    /// anti-aliasing setting without anti-aliasing. The parts of one frame (`render --region`) carry it, and
     /// `snell merge` refuses parts whose fingerprints differ.
     pub fn frame_fingerprint(&self, volume_hash: u64) -> u64 {
         let b = &self.backdrop;
@@ -427,6 +433,21 @@ impl Scene {
         };
         let mut render = self.render;
         render.tile = 0;
+        render.clear_crossing_cells = true;
+        render.skip_empty_approach = true;
+        render.skip_clear_segments = true;
+        if render.traversal != Traversal::Step {
+            render.step = 0.0;
+        }
+        if render.supersampling == Supersampling::None {
+            render.samples = 0;
+            render.prss_samples = 0;
+            render.prss_map = PrssMap::default();
+            render.prss_fallback = PrssFallback::default();
+            render.footprint = FootprintFilter::default();
+            render.prss_curvature = 0.0;
+            render.seed = 0;
+        }
         let text = format!(
             "{}x{} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {pattern} {:?}",
             self.width,
