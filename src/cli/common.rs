@@ -248,7 +248,15 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
     snell::atomic::check_target(path)
         .map_err(|e| anyhow::anyhow!("{}: {e}; outputs go to files", path.display()))?;
     snell::atomic::check_writable(path).map_err(|e| {
-        anyhow::anyhow!("{}: cannot write in {}: {e}", path.display(), dir.display())
+        if e.kind() == std::io::ErrorKind::InvalidFilename {
+            // The output is written as `.NAME.PID.N.tmp` beside its target.
+            anyhow::anyhow!(
+                "{}: the name is too long to write (the temporary file beside it takes about 20 characters more)",
+                path.display()
+            )
+        } else {
+            anyhow::anyhow!("{}: cannot write in {}: {e}", path.display(), dir.display())
+        }
     })?;
     Ok(path.to_path_buf())
 }
@@ -327,4 +335,23 @@ pub fn check_distinct(outputs: &[&Path], inputs: &[&Path]) -> anyhow::Result<()>
 /// process's peak) as `1.5 GiB`.
 pub fn human_mib(mib: f64) -> String {
     limits::human_bytes((mib * 1048576.0) as u64)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A name that fits the file system but not with the temporary file's
+    /// `.NAME.PID.N.tmp` around it is named as too long, before any work.
+    #[test]
+    fn a_name_too_long_for_its_temporary_file_is_refused_as_such() {
+        let dir = std::env::temp_dir().join(format!("snell-long-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let long = dir.join(format!("{}.png", "a".repeat(246)));
+        let e = check_output(&long).unwrap_err().to_string();
+        assert!(e.contains("the name is too long to write"), "{e}");
+        assert!(check_output(&dir.join("short.png")).is_ok());
+        assert_eq!(std::fs::read_dir(&dir).unwrap().count(), 0, "no probe left");
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }
