@@ -136,20 +136,24 @@ pub fn check_target(path: &Path) -> io::Result<()> {
 /// its start that it will be able to write its output, not after its work.
 pub fn check_writable(path: &Path) -> io::Result<()> {
     let probe = temp_path(&written_path(path))?;
-    {
-        let mut p = pending();
-        if p.closing {
-            return Err(io::Error::new(io::ErrorKind::Interrupted, "interrupted"));
-        }
-        p.live.push(probe.clone());
-    }
-    let made = fs::OpenOptions::new()
-        .write(true)
-        .create_new(true)
-        .open(&probe)
-        .and_then(|_| fs::remove_file(&probe));
+    let made = begin_temp(&probe).and_then(|_| fs::remove_file(&probe));
     pending().live.retain(|l| *l != probe);
     made
+}
+
+/// Creates the temporary file `tmp`, registered first so that a signal's
+/// clean-up cannot miss it; refused once the process is ending on a
+/// signal. The caller takes it off the list when it is renamed or removed.
+fn begin_temp(tmp: &Path) -> io::Result<File> {
+    let mut p = pending();
+    if p.closing {
+        return Err(io::Error::new(io::ErrorKind::Interrupted, "interrupted"));
+    }
+    p.live.push(tmp.to_path_buf());
+    fs::OpenOptions::new()
+        .write(true)
+        .create_new(true)
+        .open(tmp)
 }
 
 /// The file a write of `path` replaces: through a symbolic link to the
@@ -174,19 +178,7 @@ pub fn write_atomic(
     let path = &written_path(path);
     check_target(path)?;
     let tmp = temp_path(path)?;
-    let file = {
-        // Registered before it exists, so a signal's clean-up cannot miss it.
-        let mut p = pending();
-        if p.closing {
-            return Err(io::Error::new(io::ErrorKind::Interrupted, "interrupted"));
-        }
-        p.live.push(tmp.clone());
-        fs::OpenOptions::new()
-            .write(true)
-            .create_new(true)
-            .open(&tmp)
-    };
-    let written = file.and_then(|file| {
+    let written = begin_temp(&tmp).and_then(|file| {
         let mut out = BufWriter::new(file);
         write(&mut out)
             .and_then(|()| out.into_inner().map_err(|e| e.into_error()))

@@ -576,19 +576,12 @@ mod tests {
                 0.0,
                 0.0,
             );
-            assert!(parse_header(p, &b).is_err(), "vox_offset {vox}");
+            let e = parse_header(p, &b).unwrap_err().to_string();
+            // The offset as the file holds it, not a saturated cast.
+            if vox == 1e30 {
+                assert!(e.contains("vox_offset is 1.0000000150474662e30"), "{e}");
+            }
         }
-        let b = header_bytes(
-            Endian::Little,
-            [3, 1, 1, 1, 1, 1, 1, 1],
-            2,
-            [1.0; 8],
-            1e30,
-            0.0,
-            0.0,
-        );
-        let e = parse_header(p, &b).unwrap_err().to_string();
-        assert!(e.contains("vox_offset is 1.0000000150474662e30"), "{e}");
         for code in [128i16, 32, 1024, 0, 3] {
             let b = header_bytes(
                 Endian::Little,
