@@ -893,6 +893,13 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "--set an unknown camera kind", "render {sphere} -o out.png --set camera.kind=fisheye", &["--set camera.kind=fisheye:", "\"perspective\" or \"orthographic\""]),
         bad("scene", "--set a seed past u64", "render {sphere} -o out.png --set render.seed=99999999999999999999", &["--set render.seed=", "up to 9223372036854775807"]),
         bad("flag", "--memory-limit under one byte", "info r.raw --dims 2,2,2 --type u8 --memory-limit 0.4", &["--memory-limit", "under one byte"]),
+        bad("flag", "scene --view not an axis", "scene {tooth} -o s.toml --view w", &["--view", "+x, -x, +y, -y, +z or -z", "'w'"]),
+        bad("flag", "scene --fov 180", "scene {tooth} -o s.toml --fov 180", &["--fov", "180"]),
+        bad("flag", "scene --width 0", "scene {tooth} -o s.toml --width 0", &["--width", "from 1 to 32768"]),
+        bad("flag", "scene --iso NaN", "scene {tooth} -o s.toml --iso nan", &["--iso", "NaN"]),
+        bad("flag", "scene -o not a .toml name", "scene {tooth} -o s.png", &["-o s.png", "a .toml name"]),
+        bad("flag", "scene -o a file that exists, without --force", "scene {tooth} -o nokey.toml", &["nokey.toml", "exists", "--force"]),
+        bad("file", "scene of a constant volume", "scene r.raw --dims 2,2,2 --type u8 --offset 2 -o s.toml", &["r.raw", "every sample is 0", "no iso-surface"]),
     ];
 
     let before = listing(&t.0);
@@ -1130,6 +1137,148 @@ fn first_use_messages_warnings_and_help() {
 
 /// Volumes with an axis of one or two samples (no cells, or one layer of
 /// them) render with every traversal: a backdrop, not a panic.
+/// `snell scene` frames a volume so that the object lies inside the image:
+/// every border pixel's ray goes straight to the backdrop, some inner ones
+/// refract; the volume's path is written relative to the scene's folder;
+/// a raw volume keeps its layout; an existing file is replaced only with
+/// `--force`.
+#[test]
+fn scene_frames_a_volume_that_renders() {
+    let t = Tmp::new("scene");
+    let volume = t.path("ball.nrrd");
+    let o = run(&[
+        "phantom",
+        "sphere",
+        "--size",
+        "24",
+        "--radius",
+        "5",
+        "--sigma",
+        "1.5",
+        "--format",
+        "u8",
+        "-o",
+        volume.to_str().unwrap(),
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::create_dir(t.path("scenes")).unwrap();
+    let headsq = data("headsq-quarter-ct_64x64x93_u16le.raw");
+    for (name, args, expect_view) in [
+        ("ball", vec![volume.to_str().unwrap(), "--view", "-x"], "-x"),
+        (
+            "headsq",
+            vec![
+                headsq.to_str().unwrap(),
+                "--dims",
+                "64,64,93",
+                "--type",
+                "u16",
+                "--width",
+                "48",
+                "--height",
+                "32",
+            ],
+            "+y",
+        ),
+    ] {
+        let scene = t.path(&format!("scenes/{name}.toml"));
+        let mut cmd = vec!["scene"];
+        cmd.extend(&args);
+        cmd.extend(["-o", scene.to_str().unwrap()]);
+        let o = run(&cmd);
+        let e = stderr(&o);
+        assert!(o.status.success(), "{e}");
+        assert!(e.contains(&format!("looking along {expect_view}")), "{e}");
+        let text = std::fs::read_to_string(&scene).unwrap();
+        if name == "ball" {
+            assert!(text.contains("path = \"../ball.nrrd\""), "{text}");
+            assert!(
+                text.contains("filter = \"smooth-bspline3\"\nlambda = 1.0"),
+                "{text}"
+            );
+        } else {
+            assert!(
+                text.contains("[volume.raw]\ndims = [64, 64, 93]\ntype = \"u16\""),
+                "{text}"
+            );
+        }
+        let hits = t.path(&format!("{name}.exr"));
+        let o = run(&[
+            "render",
+            scene.to_str().unwrap(),
+            "-o",
+            t.path(&format!("{name}.png")).to_str().unwrap(),
+            "--hits",
+            hits.to_str().unwrap(),
+            "--set",
+            "image.width=48",
+            "--set",
+            "image.height=32",
+            "-q",
+        ]);
+        let e = stderr(&o);
+        assert!(o.status.success(), "{e}");
+        assert!(!e.contains("warning"), "{e}");
+        let h = snell::film::HitImage::read_exr(&hits).unwrap();
+        let (w, ht) = (h.width as usize, h.height as usize);
+        let mut inner = 0;
+        for y in 0..ht {
+            for x in 0..w {
+                let i = y * w + x;
+                let border = x == 0 || y == 0 || x == w - 1 || y == ht - 1;
+                if border {
+                    assert_eq!(
+                        h.events[i], 0.0,
+                        "{name}: border pixel ({x}, {y}) crosses the surface"
+                    );
+                }
+                if h.events[i] == 0.0 {
+                    assert!(
+                        h.u[i].is_finite() && h.v[i].is_finite(),
+                        "{name}: ({x}, {y}) misses the backdrop"
+                    );
+                } else {
+                    inner += 1;
+                }
+            }
+        }
+        assert!(
+            inner >= w * ht / 20,
+            "{name}: only {inner} pixels meet the surface"
+        );
+    }
+    // A scene file is replaced only when asked.
+    let scene = t.path("scenes/ball.toml");
+    let o = run(&[
+        "scene",
+        volume.to_str().unwrap(),
+        "-o",
+        scene.to_str().unwrap(),
+        "--iso",
+        "100",
+        "--filter",
+        "bspline3",
+    ]);
+    assert_fails(&o, &["ball.toml", "exists", "--force"]);
+    let o = run(&[
+        "scene",
+        volume.to_str().unwrap(),
+        "-o",
+        scene.to_str().unwrap(),
+        "--iso",
+        "100",
+        "--filter",
+        "bspline3",
+        "--force",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(
+        text.contains("filter = \"bspline3\"\niso = 100.0"),
+        "{text}"
+    );
+}
+
 #[test]
 fn thin_volumes_render_with_every_traversal() {
     let t = Tmp::new("thin");

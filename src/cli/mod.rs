@@ -13,6 +13,7 @@ mod reference;
 mod render;
 mod resample;
 mod sample;
+mod scene;
 
 use clap::{Parser, Subcommand};
 
@@ -36,6 +37,8 @@ pub struct Cli {
 enum Command {
     /// Describe a volume: dims, type, spacing, value range, histogram, iso-values to try.
     Info(info::Args),
+    /// Write a scene file for a volume: camera and checkerboard framed from its extent, iso-value from its histogram.
+    Scene(scene::Args),
     /// Evaluate the reconstructed field and its gradient at given points (CSV out).
     Sample(sample::Args),
     /// Write a synthetic volume (the glass sphere with holes, Marschner-Lobb) as NRRD or MetaImage.
@@ -63,6 +66,7 @@ enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(a) => info::run(a),
+        Command::Scene(a) => scene::run(a),
         Command::Sample(a) => sample::run(a),
         Command::Phantom(a) => phantom::run(a),
         Command::Resample(a) => resample::run(a),

@@ -11,11 +11,14 @@
 //! paths resolved beside the file, the photograph loaded) → [`Scene`].
 //! `words` rewords serde's and TOML's refusals for people; [`settings`]
 //! holds the render settings and their named choices; [`camera`],
-//! [`backdrop`] and [`orbit`] the geometry.
+//! [`backdrop`] and [`orbit`] the geometry; [`framing`] places a camera
+//! and a checkerboard for a volume and writes the scene file (`snell
+//! scene`).
 
 pub mod backdrop;
 pub mod camera;
 mod file;
+pub mod framing;
 pub mod orbit;
 mod overrides;
 mod resolve;
@@ -52,7 +55,7 @@ pub const DEFAULT_CLASSIFY: Method = Method::Bezier(2);
 
 /// Largest image side accepted (and 2^28 pixels in all).
 pub const MAX_IMAGE_SIDE: u32 = 32768;
-const MAX_IMAGE_PIXELS: u64 = 1 << 28;
+pub const MAX_IMAGE_PIXELS: u64 = 1 << 28;
 
 /// Bytes a frame holds per pixel at its peak: the film (hit position, events,
 /// colour: 24 B), the tiles' outputs before assembly (24 B), the anti-aliasing
