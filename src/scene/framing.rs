@@ -244,6 +244,12 @@ impl Draft {
         let fr = &self.framing;
         let mut s = String::new();
         for line in &self.note {
+            // A line break in a note (a file name may hold one) would end
+            // the comment.
+            let line: String = line
+                .chars()
+                .map(|c| if c.is_control() { ' ' } else { c })
+                .collect();
             s += &format!("# {line}\n");
         }
         s += &format!(
@@ -488,7 +494,7 @@ mod tests {
         let view = View::parse("-y").unwrap();
         let extent = [243.1, 243.1, 160.5];
         Draft {
-            note: vec!["test".into()],
+            note: vec!["test".into(), "a name\nwith a break: [x]".into()],
             volume: DraftVolume {
                 path: "data/a \"b\".raw".into(),
                 raw,
