@@ -186,7 +186,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         tiles,
         quiet: a.quiet,
         // Only the parts of a frame need to say which frame they are.
-        volume_hash: window.map(|_| prep.volume.content_hash()),
+        volume_hash: window.map(|_| prep.volume_hash()),
     };
     match a.orbit {
         None => render_one(&a, &scene, &renderer, &outputs, trace, &held),

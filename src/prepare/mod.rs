@@ -319,6 +319,10 @@ pub struct Prepared {
     pub accel: Option<Arc<Accel>>,
     /// Build times of what was built for this frame (0 when cached).
     pub times: PrepareTimes,
+    /// [`Volume::content_hash`] where the preparation computed it (a disk
+    /// cache keys its files by it), so a caller needing it too (a region's
+    /// frame fingerprint) need not read every sample again.
+    content_hash: Option<u64>,
 }
 
 impl Prepared {
@@ -345,7 +349,15 @@ impl Prepared {
                 prefilter_s: start.elapsed().as_secs_f64(),
                 ..Default::default()
             },
+            content_hash: None,
         })
+    }
+
+    /// The volume's [`Volume::content_hash`]: the preparation's, or
+    /// computed now where it had no need of it.
+    pub fn volume_hash(&self) -> u64 {
+        self.content_hash
+            .unwrap_or_else(|| self.volume.content_hash())
     }
 
     /// Adds the classification and octree `method` at `iso` (timed).
@@ -611,6 +623,7 @@ impl Cache {
             field,
             accel,
             times,
+            content_hash: self.dir.is_some().then_some(hash),
         };
         p.ready_for(&scene.render);
         let t = &p.times;
@@ -833,6 +846,12 @@ mod tests {
         let mut fresh = Cache::with_dir(&dir).unwrap();
         let second = fresh.prepare(&s, &LoadOptions::default()).unwrap();
         assert!(fresh.warnings.is_empty(), "{:?}", fresh.warnings);
+        // The hash the files are keyed by is the one a caller gets, as
+        // without a cache.
+        assert_eq!(second.content_hash, Some(second.volume.content_hash()));
+        let memory = Cache::new().prepare(&s, &LoadOptions::default()).unwrap();
+        assert_eq!(memory.content_hash, None);
+        assert_eq!(memory.volume_hash(), second.volume_hash());
         assert_eq!(
             first.field.as_f64().unwrap().coeffs().interior(),
             second.field.as_f64().unwrap().coeffs().interior()
