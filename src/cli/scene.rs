@@ -126,7 +126,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         Some(iso) => {
             if !(iso > stats.min && iso < stats.max) {
                 eprintln!(
-                    "warning: --iso {}: outside the samples' range ({} .. {}); the render will likely show only the backdrop",
+                    "warning: --iso {}: not between the smallest and the largest sample ({} .. {}); the render will likely show only the backdrop",
                     num(iso),
                     num(stats.min),
                     num(stats.max)
