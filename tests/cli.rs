@@ -90,7 +90,14 @@ fn info_json_has_the_promised_keys() {
         "3.2,3.2,1.5",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    assert!(String::from_utf8_lossy(&o.stdout).contains("iso-values worth trying"));
+    let text = String::from_utf8_lossy(&o.stdout);
+    assert!(text.contains("iso-values worth trying"), "{text}");
+    assert!(
+        text.contains(
+            "u16le.raw --dims 64,64,93 --type u16 --spacing 3.2,3.2,1.5 -o scene.toml --iso "
+        ),
+        "{text}"
+    );
 }
 
 /// Bytes after a NRRD's samples (a trailing newline, say) are left as teem

@@ -152,6 +152,29 @@ impl VolumeArgs {
         })
     }
 
+    /// The options as given, for a command line that reads the volume the
+    /// same way (` --dims 64,64,93 --type u16`, or nothing).
+    pub fn flags(&self) -> String {
+        let mut out = String::new();
+        for (flag, value) in [
+            ("--dims", self.dims.clone()),
+            ("--type", self.sample_type.clone()),
+            ("--endian", self.endian.clone()),
+            ("--spacing", self.spacing.clone()),
+            ("--offset", self.offset.map(|o| o.to_string())),
+        ] {
+            if let Some(v) = value {
+                // The value as read: the parsers trim around commas.
+                let v: String = v.split_whitespace().collect();
+                out += &format!(" {flag} {}", shell_word(&v));
+            }
+        }
+        if self.allow_nan {
+            out += " --allow-nan";
+        }
+        out
+    }
+
     pub fn load(&self, path: &Path) -> anyhow::Result<Volume> {
         self.load_with(path, &self.load_options(path)?)
     }
@@ -174,6 +197,19 @@ impl VolumeArgs {
                 .with_context(|| format!("{}: --spacing {s}", path.display()))?;
         }
         Ok(vol)
+    }
+}
+
+/// `s` as one word for a POSIX shell: as it is where it holds only
+/// characters no shell treats specially, else in single quotes.
+pub fn shell_word(s: &str) -> String {
+    let plain = !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "._/+-,=:@%".contains(c));
+    if plain {
+        s.to_string()
+    } else {
+        format!("'{}'", s.replace('\'', "'\\''"))
     }
 }
 
@@ -340,6 +376,15 @@ pub fn human_mib(mib: f64) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn shell_words_quote_what_a_shell_would_split_or_expand() {
+        assert_eq!(shell_word("../data/a-1.nrrd"), "../data/a-1.nrrd");
+        assert_eq!(shell_word("my scan.nrrd"), "'my scan.nrrd'");
+        assert_eq!(shell_word("it's.nrrd"), "'it'\\''s.nrrd'");
+        assert_eq!(shell_word("$HOME*"), "'$HOME*'");
+        assert_eq!(shell_word(""), "''");
+    }
 
     /// A name that fits the file system but not with the temporary file's
     /// `.NAME.PID.N.tmp` around it is named as too long, before any work.

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args as ClapArgs;
 use snell::human::{num, triple as num3};
 
-use super::common::VolumeArgs;
+use super::common::{VolumeArgs, shell_word};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -82,6 +82,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         println!(
             "  iso-values worth trying: {} (the value range's midpoint: the histogram shows no two materials apart)",
             iso.join(", ")
+        );
+    }
+    if let Some(first) = iso.first() {
+        // The next step for a new dataset.
+        println!(
+            "  a scene for it: snell scene {}{} -o scene.toml --iso {first}",
+            shell_word(&a.volume.to_string_lossy()),
+            a.vol.flags()
         );
     }
     Ok(())
