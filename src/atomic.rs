@@ -159,7 +159,7 @@ fn begin_temp(tmp: &Path) -> io::Result<File> {
 /// The file a write of `path` replaces: through a symbolic link to the
 /// file it names, as other tools write, rather than replacing the link (a
 /// dangling link is replaced by the file).
-fn written_path(path: &Path) -> PathBuf {
+pub fn written_path(path: &Path) -> PathBuf {
     match fs::symlink_metadata(path) {
         Ok(m) if m.file_type().is_symlink() => {
             fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())

@@ -906,6 +906,10 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "scene --iso NaN", "scene {tooth} -o s.toml --iso nan", &["--iso", "NaN"]),
         bad("flag", "scene -o not a .toml name", "scene {tooth} -o s.png", &["-o s.png", "a .toml name"]),
         bad("flag", "scene -o a file that exists, without --force", "scene {tooth} -o nokey.toml", &["nokey.toml", "exists", "--force"]),
+        bad("flag", "scene --fov under 0.1", "scene {tooth} -o s.toml --fov 0.01", &["--fov", "from 0.1 to 179"]),
+        bad("file", "scene of a volume one sample thick", "scene r.raw --dims 4,2,1 --type u8 --offset 2 -o s.toml", &["r.raw", "4x2x1", "along z", "no surface"]),
+        bad("flag", "scene --spacing 1e-15 (a domain too small to frame)", "scene {tooth} -o s.toml --spacing 1e-15,1e-15,1e-15", &["tooth.nrrd", "under the 1e-9", "larger spacing"]),
+        bad("flag", "scene --spacing with axes 1e7 apart", "scene {tooth} -o s.toml --spacing 1,1,1e7", &["tooth.nrrd", "factor 1e6"]),
         bad("file", "scene of a constant volume", "scene r.raw --dims 2,2,2 --type u8 --offset 2 -o s.toml", &["r.raw", "every sample is 0", "no iso-surface"]),
     ];
 
@@ -1142,8 +1146,6 @@ fn first_use_messages_warnings_and_help() {
     );
 }
 
-/// Volumes with an axis of one or two samples (no cells, or one layer of
-/// them) render with every traversal: a backdrop, not a panic.
 /// `snell scene` frames a volume so that the object lies inside the image:
 /// every border pixel's ray goes straight to the backdrop, some inner ones
 /// refract; the volume's path is written relative to the scene's folder;
@@ -1254,6 +1256,38 @@ fn scene_frames_a_volume_that_renders() {
             "{name}: only {inner} pixels meet the surface"
         );
     }
+    // Through a symbolic link -o to a scene elsewhere, the path is relative
+    // to the folder of the file written; a dangling link counts as a file
+    // that exists.
+    #[cfg(unix)]
+    {
+        std::fs::create_dir(t.path("links")).unwrap();
+        std::fs::write(t.path("scenes/linked.toml"), "").unwrap();
+        let link = t.path("links/ball.toml");
+        std::os::unix::fs::symlink("../scenes/linked.toml", &link).unwrap();
+        let dangling = t.path("links/gone.toml");
+        std::os::unix::fs::symlink("../nowhere/gone.toml", &dangling).unwrap();
+        for l in [&link, &dangling] {
+            let o = run(&["scene", volume.to_str().unwrap(), "-o", l.to_str().unwrap()]);
+            assert_fails(&o, &[".toml", "exists", "--force"]);
+        }
+        let o = run(&[
+            "scene",
+            volume.to_str().unwrap(),
+            "-o",
+            link.to_str().unwrap(),
+            "--force",
+        ]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        let text = std::fs::read_to_string(t.path("scenes/linked.toml")).unwrap();
+        assert!(text.contains("path = \"../ball.nrrd\""), "{text}");
+        assert!(
+            std::fs::symlink_metadata(&link)
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
+    }
     // A scene file is replaced only when asked.
     let scene = t.path("scenes/ball.toml");
     let o = run(&[
@@ -1284,8 +1318,31 @@ fn scene_frames_a_volume_that_renders() {
         text.contains("filter = \"bspline3\"\niso = 100.0"),
         "{text}"
     );
+    // The smoothing spline named takes the default λ as when defaulted, and
+    // the values given are written to the last digit.
+    let o = run(&[
+        "scene",
+        volume.to_str().unwrap(),
+        "-o",
+        scene.to_str().unwrap(),
+        "--filter",
+        "smooth-bspline3",
+        "--iso",
+        "100.123456789",
+        "--ior",
+        "1.23456789",
+        "--force",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = std::fs::read_to_string(&scene).unwrap();
+    assert!(
+        text.contains("lambda = 1.0\niso = 100.123456789\nior = 1.23456789\n"),
+        "{text}"
+    );
 }
 
+/// Volumes with an axis of one or two samples (no cells, or one layer of
+/// them) render with every traversal: a backdrop, not a panic.
 #[test]
 fn thin_volumes_render_with_every_traversal() {
     let t = Tmp::new("thin");

@@ -200,14 +200,20 @@ impl VolumeArgs {
     }
 }
 
-/// `s` as one word for a POSIX shell: as it is where it holds only
-/// characters no shell treats specially, else in single quotes.
+/// `s` as one word for a POSIX shell, and not an option: as it is where it
+/// holds only characters no shell treats specially, else in single quotes,
+/// and after `./` where it starts with `-`.
 pub fn shell_word(s: &str) -> String {
+    let s = if s.starts_with('-') {
+        format!("./{s}")
+    } else {
+        s.to_string()
+    };
     let plain = !s.is_empty()
         && s.chars()
             .all(|c| c.is_ascii_alphanumeric() || "._/+-,=:@%".contains(c));
     if plain {
-        s.to_string()
+        s
     } else {
         format!("'{}'", s.replace('\'', "'\\''"))
     }
@@ -384,6 +390,8 @@ mod tests {
         assert_eq!(shell_word("it's.nrrd"), "'it'\\''s.nrrd'");
         assert_eq!(shell_word("$HOME*"), "'$HOME*'");
         assert_eq!(shell_word(""), "''");
+        assert_eq!(shell_word("-dash.nrrd"), "./-dash.nrrd");
+        assert_eq!(shell_word("-a b"), "'./-a b'");
     }
 
     /// A name that fits the file system but not with the temporary file's

@@ -8,11 +8,14 @@ use std::path::{Component, Path, PathBuf};
 use anyhow::{Context, bail};
 use clap::Args as ClapArgs;
 
+use snell::filter::FilterKind;
 use snell::human::num;
 use snell::scene::framing::{self, DEFAULT_FOV_Y, Draft, DraftVolume, View};
 use snell::scene::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, Scene};
 
-use super::common::{VolumeArgs, check_distinct, check_format, check_output, filter_kind};
+use super::common::{
+    VolumeArgs, check_distinct, check_format, check_output, filter_kind, shell_word,
+};
 use super::progress::{self, Step};
 
 #[derive(ClapArgs, Debug)]
@@ -48,7 +51,8 @@ pub struct Args {
     /// Image height in pixels.
     #[arg(long, default_value_t = 512, value_parser = image_side)]
     pub height: u32,
-    /// Vertical field of view in degrees, between 0 and 180.
+    /// Vertical field of view in degrees, from 0.1 to 179 (narrower puts
+    /// the camera so far out that precision fails; a scene file takes any).
     #[arg(long, default_value_t = DEFAULT_FOV_Y, allow_negative_numbers = true)]
     pub fov: f64,
     /// Replace the output file if it exists (a scene file is often edited
@@ -58,6 +62,10 @@ pub struct Args {
     #[command(flatten)]
     pub vol: VolumeArgs,
 }
+
+/// The narrowest and widest `--fov`, in degrees.
+const MIN_FOV: f64 = 0.1;
+const MAX_FOV: f64 = 179.0;
 
 /// `--width`, `--height`: a side the renderer accepts.
 fn image_side(s: &str) -> Result<u32, String> {
@@ -70,10 +78,15 @@ fn image_side(s: &str) -> Result<u32, String> {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    let filter = match &a.filter {
-        Some(name) => filter_kind(name, a.lambda)?,
-        None => filter_kind("smooth-bspline3", Some(a.lambda.unwrap_or(1.0)))?,
+    // The smoothing spline, named or by default, takes λ = 1 unless given.
+    let name = a.filter.as_deref().unwrap_or("smooth-bspline3");
+    let smooths = FilterKind::with_lambda(name, Some(1.0)).is_ok_and(|k| k.smooths());
+    let lambda = if smooths {
+        Some(a.lambda.unwrap_or(1.0))
+    } else {
+        a.lambda
     };
+    let filter = filter_kind(name, lambda)?;
     if (a.width as u64) * (a.height as u64) > MAX_IMAGE_PIXELS {
         bail!(
             "--width {} --height {}: over the renderer's {MAX_IMAGE_PIXELS} pixels",
@@ -89,9 +102,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     {
         bail!("--iso must be a finite number, got {iso}");
     }
-    if !(a.fov > 0.0 && a.fov < 180.0) {
+    if !(MIN_FOV..=MAX_FOV).contains(&a.fov) {
         bail!(
-            "--fov must be between 0 and 180 degrees (both excluded), got {}",
+            "--fov must be from {MIN_FOV} to {MAX_FOV} degrees, got {}",
             a.fov
         );
     }
@@ -104,16 +117,31 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     check_format(&a.output, "-o", &["toml"])?;
     check_output(&a.output)?;
     check_distinct(&[&a.output], &[&a.volume])?;
-    if !a.force && a.output.exists() {
+    // A dangling symbolic link exists too: writing would replace it.
+    if !a.force && std::fs::symlink_metadata(&a.output).is_ok() {
         bail!(
             "{}: exists; --force replaces it (a scene file is often edited by hand)",
             a.output.display()
         );
     }
+    let volume_path = path_from(&a.output, &a.volume)?;
     let opts = a.vol.load_options(&a.volume)?;
     let reading = Step::named(format!("reading {}", a.volume.display()));
     let vol = progress::watch(&reading, false, || a.vol.load_with(&a.volume, &opts))?;
-    let volume_path = path_from(&a.output, &a.volume)?;
+    // The scene reader's own check of a spacing (here one --spacing set).
+    snell::volume::check_spacing_ratio(vol.spacing())
+        .with_context(|| a.volume.display().to_string())?;
+    let d = vol.dims();
+    if let Some(axis) = (0..3).find(|&i| d[i] < 2) {
+        bail!(
+            "{}: {}x{}x{} samples: one sample along {} makes no cells there, so no surface to frame",
+            a.volume.display(),
+            d[0],
+            d[1],
+            d[2],
+            ["x", "y", "z"][axis]
+        );
+    }
     let stats = vol.stats();
     if stats.min == stats.max {
         bail!(
@@ -189,8 +217,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let text = draft.to_toml();
     // What is written is a scene the renderer reads (its volume is not
     // read again here).
-    let scene = Scene::parse(&text, &a.output, &[]).with_context(|| {
-        format!("internal error: the drafted scene does not read back:\n{text}")
+    let scene = Scene::parse(&text, &a.output, &[]).map_err(|e| {
+        anyhow::anyhow!(
+            "internal error, please report it: the drafted scene does not read back: {e}"
+        )
     })?;
     debug_assert!(scene.ignored_settings().is_empty());
     snell::atomic::write_atomic(&a.output, |w| {
@@ -211,29 +241,37 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     );
     eprintln!(
         "render it with: snell render {} -o image.png",
-        a.output.display()
+        shell_word(&a.output.to_string_lossy())
     );
     Ok(())
 }
 
 /// The volume's path as the scene file at `scene` writes it: relative to
-/// the file's folder (scene paths are read from there), or absolute where
-/// the two share no root.
+/// the folder of the file written (scene paths are read from there; through
+/// a symbolic link `-o`, the folder of the file it names), or absolute
+/// where the two share only the root. The volume's own name is kept, a
+/// symbolic link included; the folders are resolved.
 fn path_from(scene: &Path, volume: &Path) -> anyhow::Result<String> {
-    let volume_abs = std::fs::canonicalize(volume)
-        .with_context(|| format!("{}: cannot read", volume.display()))?;
-    let dir = match scene.parent() {
-        Some(d) if !d.as_os_str().is_empty() => d,
-        _ => Path::new("."),
+    let folder = |p: &Path| -> anyhow::Result<PathBuf> {
+        let dir = match p.parent() {
+            Some(d) if !d.as_os_str().is_empty() => d,
+            _ => Path::new("."),
+        };
+        std::fs::canonicalize(dir)
+            .with_context(|| format!("{}: folder {}", p.display(), dir.display()))
     };
-    let dir_abs =
-        std::fs::canonicalize(dir).with_context(|| format!("{}: cannot resolve", dir.display()))?;
-    let path = relative(&volume_abs, &dir_abs).unwrap_or(volume_abs);
+    let Some(name) = volume.file_name() else {
+        bail!("{}: not a file name", volume.display());
+    };
+    let volume_abs = folder(volume)?.join(name);
+    let written = snell::atomic::written_path(scene);
+    let path = relative(&volume_abs, &folder(&written)?).unwrap_or(volume_abs);
     match path.to_str() {
         Some(s) => Ok(s.to_string()),
         None => bail!(
-            "{}: the path is not UTF-8, which a scene file (TOML) cannot hold; move or link the volume under a UTF-8 name",
-            volume.display()
+            "{}: the path ({}) is not UTF-8, which a scene file (TOML) cannot hold; give the volume a UTF-8 name, or a symbolic link to it in a folder with one",
+            volume.display(),
+            path.display()
         ),
     }
 }

@@ -126,7 +126,27 @@ pub enum FramingError {
     BadFov(f64),
     #[error("the image's aspect ratio must be a finite number > 0, got {0}")]
     BadAspect(f64),
+    /// A domain so small that the camera's distance from it would vanish
+    /// beside its coordinates (the renderer needs them apart by 1e-12).
+    #[error(
+        "the volume's domain is {} world units across, under the {MIN_EXTENT:e} a framed camera needs; set a larger spacing",
+        num(*.0)
+    )]
+    TooSmall(f64),
+    /// A camera or backdrop beyond the renderer's coordinates.
+    #[error(
+        "the camera or backdrop would stand up to {} world units out, beyond the {MAX_PLACE:e} a scene may place them; set a smaller spacing or a wider field of view",
+        num(*.0)
+    )]
+    TooFar(f64),
 }
+
+/// The smallest domain [`frame`] places a camera for, in world units.
+pub const MIN_EXTENT: f64 = 1e-9;
+
+/// The farthest [`frame`] places a camera or backdrop coordinate, well
+/// inside the renderer's [`crate::scene::camera::MAX_COORD`].
+pub const MAX_PLACE: f64 = 1e140;
 
 /// The camera and backdrop for a volume of `extent` (world units) seen
 /// along `view` with a vertical field of view of `fov_y` degrees, in an
@@ -145,6 +165,9 @@ pub fn frame(
     let largest = extent.iter().fold(0.0f64, |m, &e| m.max(e));
     if largest == 0.0 {
         return Err(FramingError::Point);
+    }
+    if largest < MIN_EXTENT {
+        return Err(FramingError::TooSmall(largest));
     }
     if !(fov_y > 0.0 && fov_y < 180.0) {
         return Err(FramingError::BadFov(fov_y));
@@ -178,6 +201,12 @@ pub fn frame(
     }
     let distance = round_up(distance);
     let behind = round_up(half_depth + largest);
+    // A bound on every coordinate placed (NaN where an absurd extent
+    // overflowed the distances).
+    let far = centre.abs().max_element() + distance + behind;
+    if far.is_nan() || far > MAX_PLACE {
+        return Err(FramingError::TooFar(far));
+    }
     let view_height = 2.0 * (fov_y.to_radians() * 0.5).tan() * (distance + behind);
     Ok(Framing {
         position: centre - f * distance,
@@ -237,9 +266,10 @@ pub struct Draft {
 }
 
 impl Draft {
-    /// The scene file: every section the renderer needs, each value
-    /// written so that it reads back as the same `f64` to the digits shown
-    /// (seven significant ones at most).
+    /// The scene file: every section the renderer needs. The values the
+    /// user chose (iso-value, ior, λ, spacing, field of view) read back as
+    /// the same `f64`; the placed geometry, already rounded, is written to
+    /// seven significant digits at most.
     pub fn to_toml(&self) -> String {
         let fr = &self.framing;
         let mut s = String::new();
@@ -265,7 +295,7 @@ impl Draft {
             vector(fr.position),
             vector(fr.look_at),
             vector(fr.up),
-            float(fr.fov_y)
+            given(fr.fov_y)
         );
         let v = &self.volume;
         s += &format!(
@@ -273,7 +303,12 @@ impl Draft {
             toml::Value::String(v.path.clone())
         );
         if let Some(sp) = v.spacing {
-            s += &format!("spacing = {}\n", vector(DVec3::from_array(sp)));
+            s += &format!(
+                "spacing = [{}, {}, {}]\n",
+                given(sp[0]),
+                given(sp[1]),
+                given(sp[2])
+            );
         }
         if v.allow_nan {
             s += "allow_nan = true\n";
@@ -294,9 +329,9 @@ impl Draft {
         }
         s += &format!("\n[surface]\nfilter = \"{}\"\n", self.filter.name());
         if self.filter.smooths() {
-            s += &format!("lambda = {}\n", float(self.filter.lambda()));
+            s += &format!("lambda = {}\n", given(self.filter.lambda()));
         }
-        s += &format!("iso = {}\nior = {}\n", float(self.iso), float(self.ior));
+        s += &format!("iso = {}\nior = {}\n", given(self.iso), given(self.ior));
         s += &format!(
             "\n[backdrop]\ncenter = {}\nnormal = {}\nu_axis = {}\nchecker = {}\n",
             vector(fr.backdrop_center),
@@ -315,6 +350,17 @@ fn float(x: f64) -> String {
     // `-0` reads as an integer zero's sign; the scene means zero.
     let x = if x == 0.0 { 0.0 } else { x };
     let t = num(x);
+    if t.contains(['.', 'e', 'i', 'N']) {
+        t
+    } else {
+        t + ".0"
+    }
+}
+
+/// A TOML float for a value the user gave (iso-value, ior, λ, spacing)
+/// or the field of view: every digit it takes to read back the same `f64`.
+fn given(x: f64) -> String {
+    let t = crate::human::exact(if x == 0.0 { 0.0 } else { x });
     if t.contains(['.', 'e', 'i', 'N']) {
         t
     } else {
@@ -474,6 +520,25 @@ mod tests {
             frame([1.0; 3], v, 30.0, 0.0),
             Err(FramingError::BadAspect(_))
         ));
+        assert_eq!(
+            frame([1e-10, 0.0, 0.0], v, 30.0, 1.0),
+            Err(FramingError::TooSmall(1e-10))
+        );
+        assert!(frame([1e-9, 0.0, 0.0], v, 30.0, 1.0).is_ok());
+        assert!(matches!(
+            frame([1e141, 1.0, 1.0], v, 30.0, 1.0),
+            Err(FramingError::TooFar(_))
+        ));
+        assert!(matches!(
+            frame([1.0, 1e140, 1.0], v, 30.0, 1.0),
+            Err(FramingError::TooFar(_))
+        ));
+        for huge in [1e300, f64::MAX] {
+            assert!(matches!(
+                frame([huge, 1.0, 1.0], v, 0.001, 1.0),
+                Err(FramingError::TooFar(_))
+            ));
+        }
     }
 
     #[test]
@@ -502,8 +567,8 @@ mod tests {
                 allow_nan: true,
             },
             filter,
-            iso: 524.0,
-            ior: 1.3,
+            iso: 524.123456789,
+            ior: 1.23456789,
             width: 640,
             height: 480,
             view,
@@ -521,7 +586,12 @@ mod tests {
             offset: 7,
         };
         for (raw, filter) in [
-            (Some(raw), FilterKind::SmoothBSpline3 { lambda: 0.5 }),
+            (
+                Some(raw),
+                FilterKind::SmoothBSpline3 {
+                    lambda: 0.123456789,
+                },
+            ),
             (None, FilterKind::BSpline(3)),
         ] {
             let d = draft(raw.clone(), filter);
@@ -531,8 +601,10 @@ mod tests {
             assert!(scene.ignored_settings().is_empty(), "{text}");
             assert_eq!((scene.width, scene.height), (640, 480));
             assert_eq!(scene.surface.filter, filter);
-            assert_eq!(scene.surface.iso, 524.0);
-            assert_eq!(scene.surface.ior, 1.3);
+            // What the user gave reads back to the last bit.
+            assert_eq!(scene.surface.iso, 524.123456789);
+            assert_eq!(scene.surface.ior, 1.23456789);
+            assert_eq!(scene.surface.filter.lambda(), filter.lambda());
             assert_eq!(scene.spacing, Some([0.957, 0.957, 1.5]));
             let fr = &d.framing;
             let close = |a: DVec3, b: DVec3| (a - b).length() <= 1e-6 * (1.0 + b.length());
