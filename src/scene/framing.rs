@@ -153,6 +153,8 @@ pub const MAX_PLACE: f64 = 1e140;
 /// image `aspect` (width over height) wide. Distances are rounded up to
 /// four significant digits and the checker size to 1, 2, 2.5 or 5 times a
 /// power of ten, so the file reads well; the rounding keeps the fit.
+/// Refused: an extent that is not finite, one too small or too large to
+/// place a camera for, a field of view outside (0°, 180°).
 pub fn frame(
     extent: [f64; 3],
     view: View,
@@ -183,13 +185,13 @@ pub fn frame(
     let u = r.cross(f);
     let tan = (fov_y.to_radians() * 0.5).tan() * FILL;
     let half_depth = 0.5 * extent[view.axis];
+    // A box seen end-on with no breadth (a row of samples) still gets its
+    // camera off its near face.
+    let mut distance = half_depth + 1e-3 * largest;
     // Each corner c (from the centre) sits d + c·f in front of a camera d
     // before the centre; it projects inside the filled part of the image
     // when its offsets c·u and c·r are within that depth times the half
     // field's tangents.
-    // A box seen end-on with no breadth (a row of samples) still gets its
-    // camera off its near face.
-    let mut distance = half_depth + 1e-3 * largest;
     for corner in 0..8 {
         let c = DVec3::new(
             if corner & 1 == 0 { -0.5 } else { 0.5 },
