@@ -1290,41 +1290,28 @@ fn scene_frames_a_volume_that_renders() {
     }
     // A scene file is replaced only when asked.
     let scene = t.path("scenes/ball.toml");
-    let o = run(&[
-        "scene",
-        volume.to_str().unwrap(),
-        "-o",
-        scene.to_str().unwrap(),
-        "--iso",
-        "100",
-        "--filter",
-        "bspline3",
-    ]);
+    let write = |extra: &[&str]| -> (Output, String) {
+        let mut args = vec![
+            "scene",
+            volume.to_str().unwrap(),
+            "-o",
+            scene.to_str().unwrap(),
+        ];
+        args.extend(extra);
+        let o = run(&args);
+        (o, std::fs::read_to_string(&scene).unwrap())
+    };
+    let (o, _) = write(&["--iso", "100", "--filter", "bspline3"]);
     assert_fails(&o, &["ball.toml", "exists", "--force"]);
-    let o = run(&[
-        "scene",
-        volume.to_str().unwrap(),
-        "-o",
-        scene.to_str().unwrap(),
-        "--iso",
-        "100",
-        "--filter",
-        "bspline3",
-        "--force",
-    ]);
+    let (o, text) = write(&["--iso", "100", "--filter", "bspline3", "--force"]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let text = std::fs::read_to_string(&scene).unwrap();
     assert!(
         text.contains("filter = \"bspline3\"\niso = 100.0"),
         "{text}"
     );
     // The smoothing spline named takes the default λ as when defaulted, and
     // the values given are written to the last digit.
-    let o = run(&[
-        "scene",
-        volume.to_str().unwrap(),
-        "-o",
-        scene.to_str().unwrap(),
+    let (o, text) = write(&[
         "--filter",
         "smooth-bspline3",
         "--iso",
@@ -1334,7 +1321,6 @@ fn scene_frames_a_volume_that_renders() {
         "--force",
     ]);
     assert!(o.status.success(), "{}", stderr(&o));
-    let text = std::fs::read_to_string(&scene).unwrap();
     assert!(
         text.contains("lambda = 1.0\niso = 100.123456789\nior = 1.23456789\n"),
         "{text}"
