@@ -42,6 +42,20 @@ pub fn triple(v: [f64; 3]) -> String {
     format!("{} x {} x {}", num(v[0]), num(v[1]), num(v[2]))
 }
 
+/// `s` as one word for a POSIX shell: as it is where it holds only
+/// characters no shell treats specially, else in single quotes (for the
+/// commands snell prints for people to paste).
+pub fn shell_quote(s: &str) -> String {
+    let plain = !s.is_empty()
+        && s.chars()
+            .all(|c| c.is_ascii_alphanumeric() || "._/+-,=:@%".contains(c));
+    if plain {
+        s.to_string()
+    } else {
+        format!("'{}'", s.replace('\'', "'\\''"))
+    }
+}
+
 /// `x` for machine output: the shortest text that parses back to the same
 /// `f64`, positional from 1e-5 to below 1e16, scientific beyond.
 pub fn exact(x: f64) -> String {

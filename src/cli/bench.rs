@@ -220,16 +220,7 @@ fn run_targets(a: &Args) -> anyhow::Result<()> {
 /// The command as typed, quoted where a shell would need it.
 fn command_line() -> String {
     std::env::args()
-        .map(|a| {
-            if !a.is_empty()
-                && a.chars()
-                    .all(|c| c.is_ascii_alphanumeric() || "-_./=:,+@%".contains(c))
-            {
-                a
-            } else {
-                format!("'{}'", a.replace('\'', "'\\''"))
-            }
-        })
+        .map(|a| snell::human::shell_quote(&a))
         .collect::<Vec<_>>()
         .join(" ")
 }

@@ -6,6 +6,7 @@ use anyhow::{Context, bail};
 use clap::Args;
 
 use snell::filter::{FilterError, FilterKind};
+use snell::human::shell_quote;
 use snell::volume::{self, Endian, LoadOptions, RawSpec, SampleType, Volume, limits};
 
 /// How to read a volume file (raw files need their layout spelled out).
@@ -166,7 +167,7 @@ impl VolumeArgs {
             if let Some(v) = value {
                 // The value as read: the parsers trim around commas.
                 let v: String = v.split_whitespace().collect();
-                out += &format!(" {flag} {}", shell_word(&v));
+                out += &format!(" {flag} {}", shell_quote(&v));
             }
         }
         if self.allow_nan {
@@ -200,22 +201,13 @@ impl VolumeArgs {
     }
 }
 
-/// `s` as one word for a POSIX shell, and not an option: as it is where it
-/// holds only characters no shell treats specially, else in single quotes,
-/// and after `./` where it starts with `-`.
-pub fn shell_word(s: &str) -> String {
-    let s = if s.starts_with('-') {
-        format!("./{s}")
+/// A path as one word for a POSIX shell ([`shell_quote`]) that a command
+/// cannot take for an option: after `./` where it starts with `-`.
+pub fn shell_path(s: &str) -> String {
+    if s.starts_with('-') {
+        shell_quote(&format!("./{s}"))
     } else {
-        s.to_string()
-    };
-    let plain = !s.is_empty()
-        && s.chars()
-            .all(|c| c.is_ascii_alphanumeric() || "._/+-,=:@%".contains(c));
-    if plain {
-        s
-    } else {
-        format!("'{}'", s.replace('\'', "'\\''"))
+        shell_quote(s)
     }
 }
 
@@ -385,13 +377,13 @@ mod tests {
 
     #[test]
     fn shell_words_quote_what_a_shell_would_split_or_expand() {
-        assert_eq!(shell_word("../data/a-1.nrrd"), "../data/a-1.nrrd");
-        assert_eq!(shell_word("my scan.nrrd"), "'my scan.nrrd'");
-        assert_eq!(shell_word("it's.nrrd"), "'it'\\''s.nrrd'");
-        assert_eq!(shell_word("$HOME*"), "'$HOME*'");
-        assert_eq!(shell_word(""), "''");
-        assert_eq!(shell_word("-dash.nrrd"), "./-dash.nrrd");
-        assert_eq!(shell_word("-a b"), "'./-a b'");
+        assert_eq!(shell_path("../data/a-1.nrrd"), "../data/a-1.nrrd");
+        assert_eq!(shell_path("my scan.nrrd"), "'my scan.nrrd'");
+        assert_eq!(shell_path("it's.nrrd"), "'it'\\''s.nrrd'");
+        assert_eq!(shell_path("$HOME*"), "'$HOME*'");
+        assert_eq!(shell_path(""), "''");
+        assert_eq!(shell_path("-dash.nrrd"), "./-dash.nrrd");
+        assert_eq!(shell_path("-a b"), "'./-a b'");
     }
 
     /// A name that fits the file system but not with the temporary file's

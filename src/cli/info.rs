@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use clap::Args as ClapArgs;
 use snell::human::{num, triple as num3};
 
-use super::common::{VolumeArgs, shell_word};
+use super::common::{VolumeArgs, shell_path};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -88,7 +88,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         // The next step for a new dataset.
         println!(
             "  a scene for it: snell scene {}{} -o scene.toml --iso {first}",
-            shell_word(&a.volume.to_string_lossy()),
+            shell_path(&a.volume.to_string_lossy()),
             a.vol.flags()
         );
     }

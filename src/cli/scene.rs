@@ -14,7 +14,7 @@ use snell::scene::framing::{self, DEFAULT_FOV_Y, Draft, DraftVolume, View};
 use snell::scene::{MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, Scene};
 
 use super::common::{
-    VolumeArgs, check_distinct, check_format, check_output, filter_kind, shell_word,
+    VolumeArgs, check_distinct, check_format, check_output, filter_kind, shell_path,
 };
 use super::progress::{self, Step};
 
@@ -241,7 +241,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     );
     eprintln!(
         "render it with: snell render {} -o image.png",
-        shell_word(&a.output.to_string_lossy())
+        shell_path(&a.output.to_string_lossy())
     );
     Ok(())
 }

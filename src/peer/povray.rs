@@ -299,19 +299,9 @@ impl PovExport {
     pub fn command_line(&self, variant: Variant, threads: usize) -> String {
         format!(
             "cd {} && povray {}",
-            shell_quote(&self.dir.display().to_string()),
+            crate::human::shell_quote(&self.dir.display().to_string()),
             self.args(variant, threads).join(" ")
         )
-    }
-}
-
-fn shell_quote(s: &str) -> String {
-    if s.chars()
-        .all(|c| c.is_ascii_alphanumeric() || "/._-+=,:".contains(c))
-    {
-        s.to_string()
-    } else {
-        format!("'{}'", s.replace('\'', "'\\''"))
     }
 }
 

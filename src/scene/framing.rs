@@ -294,9 +294,9 @@ impl Draft {
              [camera]\nkind = \"perspective\"\nposition = {}\nlook_at = {}\nup = {}\nfov_y = {}\n",
             self.view.name(),
             num(FILL * 100.0),
-            vector(fr.position),
-            vector(fr.look_at),
-            vector(fr.up),
+            vector(fr.position.to_array(), float),
+            vector(fr.look_at.to_array(), float),
+            vector(fr.up.to_array(), float),
             given(fr.fov_y)
         );
         let v = &self.volume;
@@ -305,12 +305,7 @@ impl Draft {
             toml::Value::String(v.path.clone())
         );
         if let Some(sp) = v.spacing {
-            s += &format!(
-                "spacing = [{}, {}, {}]\n",
-                given(sp[0]),
-                given(sp[1]),
-                given(sp[2])
-            );
+            s += &format!("spacing = {}\n", vector(sp, given));
         }
         if v.allow_nan {
             s += "allow_nan = true\n";
@@ -336,9 +331,9 @@ impl Draft {
         s += &format!("iso = {}\nior = {}\n", given(self.iso), given(self.ior));
         s += &format!(
             "\n[backdrop]\ncenter = {}\nnormal = {}\nu_axis = {}\nchecker = {}\n",
-            vector(fr.backdrop_center),
-            vector(fr.backdrop_normal),
-            vector(fr.u_axis),
+            vector(fr.backdrop_center.to_array(), float),
+            vector(fr.backdrop_normal.to_array(), float),
+            vector(fr.u_axis.to_array(), float),
             float(fr.checker)
         );
         s += "\n[render]\ntraversal = \"octree\"\n";
@@ -346,32 +341,31 @@ impl Draft {
     }
 }
 
-/// A TOML float: [`num`]'s digits, with a point where they have none (so
-/// the value is a float, not an integer).
+/// `x` as a TOML float in the digits of `digits`, with a point where they
+/// have none (so the value is a float, not an integer); −0 as 0.
+fn toml_float(x: f64, digits: fn(f64) -> String) -> String {
+    let t = digits(if x == 0.0 { 0.0 } else { x });
+    if t.contains(['.', 'e', 'i', 'N']) {
+        t
+    } else {
+        t + ".0"
+    }
+}
+
+/// A placed, rounded value: [`num`]'s seven significant digits at most.
 fn float(x: f64) -> String {
-    // `-0` reads as an integer zero's sign; the scene means zero.
-    let x = if x == 0.0 { 0.0 } else { x };
-    let t = num(x);
-    if t.contains(['.', 'e', 'i', 'N']) {
-        t
-    } else {
-        t + ".0"
-    }
+    toml_float(x, num)
 }
 
-/// A TOML float for a value the user gave (iso-value, ior, λ, spacing)
-/// or the field of view: every digit it takes to read back the same `f64`.
+/// A value the user gave (iso-value, ior, λ, spacing) or the field of
+/// view: every digit it takes to read back the same `f64`.
 fn given(x: f64) -> String {
-    let t = crate::human::exact(if x == 0.0 { 0.0 } else { x });
-    if t.contains(['.', 'e', 'i', 'N']) {
-        t
-    } else {
-        t + ".0"
-    }
+    toml_float(x, crate::human::exact)
 }
 
-fn vector(v: DVec3) -> String {
-    format!("[{}, {}, {}]", float(v.x), float(v.y), float(v.z))
+/// `[x, y, z]` in the digits of `value` ([`float`] or [`given`]).
+fn vector(v: [f64; 3], value: fn(f64) -> String) -> String {
+    format!("[{}, {}, {}]", value(v[0]), value(v[1]), value(v[2]))
 }
 
 #[cfg(test)]
