@@ -1418,6 +1418,23 @@ fn image_over_the_memory_limit_is_refused() {
         ],
     );
     assert!(!png.exists() && !hits.exists());
+    // The same when a `--set` sized the volume and the error names it.
+    let o = bin()
+        .env("SNELL_MEMORY_LIMIT", "8M")
+        .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
+        .arg(&png)
+        .args(["--set", "image.width=256", "--set", "image.height=256"])
+        .args(["--set", "volume.phantom.size=64"])
+        .output()
+        .unwrap();
+    assert_fails(
+        &o,
+        &[
+            "--set volume.phantom.size=64: a 64x64x64 volume needs about 4.2 MiB",
+            "the memory limit of 8.0 MiB less the 6.4 MiB the 256x256 image takes",
+        ],
+    );
+    assert!(!png.exists());
 }
 
 /// Separate processes with 1 and 2 worker threads, and with another tile

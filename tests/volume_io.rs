@@ -1028,7 +1028,7 @@ fn nrrd_dims_over_memory_limit_fail_before_allocating() {
             ),
         );
         let e = error_naming(nrrd::read(&path, &opts()), &path);
-        assert!(matches!(e, VolumeError::TooLarge { .. }), "{e}");
+        assert!(matches!(e, VolumeError::OverLimit { .. }), "{e}");
 
         // A small explicit limit refuses a billion samples.
         let path = dir.write(
@@ -1043,7 +1043,7 @@ fn nrrd_dims_over_memory_limit_fail_before_allocating() {
             ..opts()
         };
         let e = error_naming(nrrd::read(&path, &small), &path);
-        assert!(matches!(e, VolumeError::TooLarge { .. }), "{e}");
+        assert!(matches!(e, VolumeError::OverLimit { .. }), "{e}");
 
         // No limit at all: the tiny data still fails before a terabyte buffer
         // is allocated (an attempt would abort the test process).
@@ -1347,7 +1347,7 @@ fn nifti_unsupported_datatype_and_truncation() {
     let e = error_naming(nifti::read(&path, &unlimited), &path);
     assert!(matches!(e, VolumeError::Truncated { .. }), "{e}");
     let e = error_naming(nifti::read(&path, &opts()), &path);
-    assert!(matches!(e, VolumeError::TooLarge { .. }), "{e}");
+    assert!(matches!(e, VolumeError::OverLimit { .. }), "{e}");
 }
 
 // ---------------------------------------------------------------------------

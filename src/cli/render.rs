@@ -129,11 +129,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let preparing = Step::named("preparing the volume (load, prefilter, cell tags)");
     // A volume refused for the memory the image leaves says so.
     let over_limit = |e: snell::scene::SceneError| -> anyhow::Error {
-        let text = e.to_string();
-        if image_bytes > 0 && text.contains("over the limit of") {
+        let refused = std::iter::successors(Some(&e as &dyn std::error::Error), |c| c.source())
+            .any(|c| c.is::<snell::volume::limits::OverLimit>());
+        if image_bytes > 0 && refused {
             let hb = snell::volume::limits::human_bytes;
             anyhow::anyhow!(
-                "{text}; that is the memory limit of {} less the {} the {} takes",
+                "{e}; that is the memory limit of {} less the {} the {} takes",
                 hb(limit),
                 hb(image_bytes),
                 match window {

@@ -717,15 +717,15 @@ fn check_distance_maps(scene: &Scene, volume: &Volume, limit: u64) -> Result<(),
     if need <= limit {
         return Ok(());
     }
-    let hb = crate::volume::limits::human_bytes;
-    Err(SceneError::Key {
+    Err(SceneError::OverLimit {
         path: scene.path.clone(),
         key: "render.traversal".into(),
-        msg: format!(
-            "the distance traversal over a {x}x{y}x{z} volume needs about {} of memory with its maps, over the limit of {}; use render.traversal = \"octree\" or raise SNELL_MEMORY_LIMIT",
-            hb(need),
-            hb(limit)
-        ),
+        source: crate::volume::limits::OverLimit {
+            what: format!("the distance traversal over a {x}x{y}x{z} volume with its maps"),
+            need,
+            limit,
+            hint: "; use render.traversal = \"octree\" or raise SNELL_MEMORY_LIMIT".into(),
+        },
     })
 }
 

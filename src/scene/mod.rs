@@ -86,12 +86,28 @@ pub enum SceneError {
         key: String,
         msg: String,
     },
+    /// An error on a key a `--set` wrote; `over_limit` keeps the refusal's
+    /// type when the key sized a working set over the memory limit.
     #[error("--set {arg}: {msg}")]
-    Override { arg: String, msg: String },
+    Override {
+        arg: String,
+        msg: String,
+        #[source]
+        over_limit: Option<crate::volume::limits::OverLimit>,
+    },
     #[error(transparent)]
     Volume(#[from] VolumeError),
     #[error("{path}: phantom: {msg}")]
     Phantom { path: PathBuf, msg: String },
+    /// A working set over the memory limit, refused before it was allocated;
+    /// `key` names the setting that sized it.
+    #[error("{path}: [{key}] {source}")]
+    OverLimit {
+        path: PathBuf,
+        key: String,
+        #[source]
+        source: crate::volume::limits::OverLimit,
+    },
     #[error("render.coefficients = \"{storage}\": {msg}")]
     Storage { storage: &'static str, msg: String },
 }
@@ -271,6 +287,10 @@ impl Scene {
                         Some(o) => SceneError::Override {
                             arg: o.clone(),
                             msg: e.to_string(),
+                            over_limit: match e {
+                                VolumeError::OverLimit { source, .. } => Some(source),
+                                _ => None,
+                            },
                         },
                         None => e.into(),
                     },
@@ -284,10 +304,10 @@ impl Scene {
                 // Against the caller's limit, before the grid is allocated.
                 crate::volume::checked_sample_count(&self.path, spec.dims(), opts.memory_limit)
                     .map_err(|e| match e {
-                        VolumeError::TooLarge { msg, .. } => SceneError::Key {
+                        VolumeError::OverLimit { source, .. } => SceneError::OverLimit {
                             path: self.path.clone(),
                             key: "volume.phantom.size".into(),
-                            msg,
+                            source,
                         },
                         e => phantom_error(e.to_string()),
                     })?;

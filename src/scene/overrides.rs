@@ -18,6 +18,7 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
     let err = |msg: &str| SceneError::Override {
         arg: arg.to_string(),
         msg: msg.to_string(),
+        over_limit: None,
     };
     let (_, value) = arg
         .split_once('=')
@@ -115,8 +116,14 @@ pub(super) fn blame_override(
     written: &[(String, String)],
     file_keys: &[String],
 ) -> SceneError {
-    let SceneError::Key { key, msg, path } = e else {
-        return e;
+    // A refusal over the memory limit keeps its type (the caller may have
+    // lent part of the limit, and says so) whoever it is blamed on.
+    let (path, key, msg, over_limit) = match e {
+        SceneError::Key { path, key, msg } => (path, key, msg, None),
+        SceneError::OverLimit { path, key, source } => {
+            (path, key, source.to_string(), Some(source))
+        }
+        e => return e,
     };
     // A missing lambda (nobody wrote one) is the fault of the override
     // that chose the smoothing spline.
@@ -145,6 +152,7 @@ pub(super) fn blame_override(
             } else {
                 format!("[{key}] {msg}")
             },
+            over_limit,
         },
         None => {
             let section = key.split('.').next().unwrap_or_default();
@@ -153,12 +161,22 @@ pub(super) fn blame_override(
                 .filter(|o| override_key(o).split('.').next() == Some(section))
                 .map(|o| format!("--set {o}"))
                 .collect();
-            let msg = if near.is_empty() {
-                msg
+            let read_with = if near.is_empty() {
+                String::new()
             } else {
-                format!("{msg} (read with {})", near.join(", "))
+                format!(" (read with {})", near.join(", "))
             };
-            SceneError::Key { path, key, msg }
+            match over_limit {
+                Some(mut source) => {
+                    source.hint.push_str(&read_with);
+                    SceneError::OverLimit { path, key, source }
+                }
+                None => SceneError::Key {
+                    path,
+                    key,
+                    msg: msg + &read_with,
+                },
+            }
         }
     }
 }

@@ -129,16 +129,38 @@ pub fn default_memory_limit() -> u64 {
 /// Fails with a message naming `what` when `bytes` exceeds `limit`.
 pub fn check_bytes(path: &Path, bytes: u64, limit: u64, what: &str) -> Result<(), VolumeError> {
     if bytes > limit {
-        return Err(VolumeError::TooLarge {
+        return Err(VolumeError::OverLimit {
             path: path.to_path_buf(),
-            msg: format!(
-                "{what} needs about {} of memory, over the limit of {} (set --memory-limit or SNELL_MEMORY_LIMIT to raise it)",
-                human_bytes(bytes),
-                human_bytes(limit)
-            ),
+            source: OverLimit {
+                what: what.to_string(),
+                need: bytes,
+                limit,
+                hint: " (set --memory-limit or SNELL_MEMORY_LIMIT to raise it)".into(),
+            },
         });
     }
     Ok(())
+}
+
+/// A working set refused before it was allocated: what needed how many
+/// bytes, and the limit it met. A type of its own (the source of the
+/// volume's and the scene's errors that carry it) so a caller that lent
+/// part of the limit to something else, as `snell render` does to the
+/// image, can find it in an error's chain and say so.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error(
+    "{what} needs about {} of memory, over the limit of {}{hint}",
+    human_bytes(*.need),
+    human_bytes(*.limit)
+)]
+pub struct OverLimit {
+    /// What would have been allocated, e.g. "a 64x64x64 volume".
+    pub what: String,
+    pub need: u64,
+    pub limit: u64,
+    /// How to get past it (and what else bears on it), appended to the
+    /// message.
+    pub hint: String,
 }
 
 /// `1.5 GiB`-style formatting for messages and reports.

@@ -127,6 +127,13 @@ pub enum VolumeError {
     },
     #[error("{path}: {msg}")]
     TooLarge { path: PathBuf, msg: String },
+    /// Over the memory limit, refused before allocating.
+    #[error("{path}: {source}")]
+    OverLimit {
+        path: PathBuf,
+        #[source]
+        source: limits::OverLimit,
+    },
     #[error(
         "{path}: {count} non-finite samples ({nan} NaN, {inf} infinite), first at index {first}; pass --allow-nan to replace them"
     )]
@@ -848,7 +855,7 @@ mod tests {
         ));
         assert!(matches!(
             checked_sample_count(p, [1024, 1024, 1024], 1 << 20),
-            Err(VolumeError::TooLarge { .. })
+            Err(VolumeError::OverLimit { source, .. }) if source.need == 17 << 30 && source.limit == 1 << 20
         ));
         assert!(checked_sample_count(p, [0, 2, 2], u64::MAX).is_err());
         assert_eq!(checked_sample_count(p, [2, 3, 4], u64::MAX).unwrap(), 24);
