@@ -57,21 +57,93 @@ pub fn hold() -> Held {
 impl Held {
     /// Renames every held file onto its target, in the order written, and
     /// goes on holding the next ones (a turntable commits frame by frame).
+    ///
+    /// A rename that fails (a target's directory made read-only meanwhile,
+    /// say) undoes the ones before it: each target's previous file is kept
+    /// under a temporary hard link until every rename has succeeded, and put
+    /// back (a target that did not exist is removed), so the outputs still
+    /// appear all or none. Where the file system has no hard links, a
+    /// replaced file cannot be put back and stays replaced.
     pub fn commit(&self) -> io::Result<()> {
+        // Held for the whole commit, so a signal's clean-up waits for it.
         let mut p = pending();
         let held = std::mem::take(&mut p.held);
-        let mut result = Ok(());
-        for (tmp, target) in held {
-            if result.is_ok() {
-                result = fs::rename(&tmp, &target)
-                    .map_err(|e| io::Error::new(e.kind(), format!("{}: {e}", target.display())));
+        let mut renamed: Vec<(&Path, Previous)> = Vec::new();
+        let mut failure = None;
+        for (tmp, target) in &held {
+            if failure.is_none() {
+                let previous = Previous::keep(target);
+                match fs::rename(tmp, target) {
+                    Ok(()) => renamed.push((target, previous)),
+                    Err(e) => {
+                        previous.discard();
+                        failure = Some(io::Error::new(
+                            e.kind(),
+                            format!("{}: {e}", target.display()),
+                        ));
+                    }
+                }
             }
-            if result.is_err() {
-                let _ = fs::remove_file(&tmp);
+            if failure.is_some() {
+                let _ = fs::remove_file(tmp);
             }
-            p.live.retain(|l| *l != tmp);
+            p.live.retain(|l| l != tmp);
         }
-        result
+        match failure {
+            None => {
+                for (_, previous) in renamed {
+                    previous.discard();
+                }
+                Ok(())
+            }
+            Some(e) => {
+                for (target, previous) in renamed.into_iter().rev() {
+                    previous.restore(target);
+                }
+                Err(e)
+            }
+        }
+    }
+}
+
+/// What a committed rename replaced, until the whole commit succeeds.
+enum Previous {
+    /// The target did not exist.
+    Absent,
+    /// The target's previous file, hard-linked under a temporary name.
+    Kept(PathBuf),
+    /// The target existed but could not be linked.
+    Lost,
+}
+
+impl Previous {
+    fn keep(target: &Path) -> Previous {
+        if fs::symlink_metadata(target).is_err() {
+            return Previous::Absent;
+        }
+        match temp_path(target) {
+            Ok(link) if fs::hard_link(target, &link).is_ok() => Previous::Kept(link),
+            _ => Previous::Lost,
+        }
+    }
+
+    fn discard(self) {
+        if let Previous::Kept(link) = self {
+            let _ = fs::remove_file(link);
+        }
+    }
+
+    /// Best effort: the commit's error is what the caller reports.
+    fn restore(self, target: &Path) {
+        match self {
+            Previous::Absent => {
+                let _ = fs::remove_file(target);
+            }
+            Previous::Kept(link) => {
+                let _ = fs::rename(link, target);
+            }
+            Previous::Lost => {}
+        }
     }
 }
 
@@ -251,6 +323,23 @@ mod tests {
         }
         assert_eq!(names(&dir), ["a.png", "b.exr"]);
         assert_eq!(fs::read(dir.join("b.exr")).unwrap(), b"b");
+        assert!(!pending().live.iter().any(|l| l.starts_with(&dir)));
+
+        // A rename that fails undoes the ones before it: a.png gets its
+        // previous file back, new.txt (which did not exist) goes, and the
+        // temporary files and links go. (Here the last target became a
+        // directory after its write, onto which a file cannot be renamed.)
+        {
+            let held = hold();
+            write_atomic(&dir.join("a.png"), |w| w.write_all(b"a2")).unwrap();
+            write_atomic(&dir.join("new.txt"), |w| w.write_all(b"n")).unwrap();
+            write_atomic(&dir.join("d"), |w| w.write_all(b"d")).unwrap();
+            fs::create_dir(dir.join("d")).unwrap();
+            let e = held.commit().unwrap_err();
+            assert!(e.to_string().contains("d:"), "{e}");
+        }
+        assert_eq!(names(&dir), ["a.png", "b.exr", "d"]);
+        assert_eq!(fs::read(dir.join("a.png")).unwrap(), b"a");
         assert!(!pending().live.iter().any(|l| l.starts_with(&dir)));
         fs::remove_dir_all(&dir).unwrap();
     }
