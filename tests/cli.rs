@@ -77,6 +77,17 @@ fn info_json_has_the_promised_keys() {
     assert_eq!(j["type"], "u16");
     assert!((j["spacing"][2].as_f64().unwrap() - 1.5).abs() < 1e-9);
     assert!(j["min"].as_f64().unwrap() <= j["max"].as_f64().unwrap());
+    // The cropped tooth's first suggestion is its surface (the data's
+    // README: 120), not the value 99% of its samples lie above, which
+    // bounds a few dark pockets (51.8).
+    let o = run(&["info", data("tooth.nrrd").to_str().unwrap(), "--json"]);
+    let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
+    let (iso, above) = (&j["suggested_iso"], &j["suggested_above"]);
+    assert!((iso[0].as_f64().unwrap() - 120.0).abs() < 5.0, "{iso}");
+    assert!(
+        above[0].as_f64().unwrap() < 0.5 && above[2].as_f64().unwrap() > 0.5,
+        "{above}"
+    );
     let o = run(&[
         "info",
         data("headsq-quarter-ct_64x64x93_u16le.raw")

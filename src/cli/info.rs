@@ -35,6 +35,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "mean": st.mean,
             "histogram": st.histogram,
             "suggested_iso": st.suggested_iso,
+            "suggested_above": st.suggested_above,
             "iso_from_modes": st.iso_from_modes,
             "replaced_nonfinite": vol.replaced_nonfinite,
         });
