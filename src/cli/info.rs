@@ -78,7 +78,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let iso: Vec<String> = st.suggested_iso.iter().map(|&v| num(v)).collect();
     if st.iso_from_modes {
-        println!("  iso-values worth trying: {}", iso.join(", "));
+        // Each with the share of samples above it: past a half, the surface
+        // bounds voids in a bulk (listed last).
+        let listed: Vec<String> = iso
+            .iter()
+            .zip(&st.suggested_above)
+            .map(|(v, &share)| match 100.0 * share {
+                p if p < 0.1 => format!("{v} (<0.1% of samples above)"),
+                p => format!("{v} ({p:.1}% of samples above)"),
+            })
+            .collect();
+        println!("  iso-values worth trying: {}", listed.join(", "));
     } else if !iso.is_empty() {
         println!(
             "  iso-values worth trying: {} (the value range's midpoint: the histogram shows no two materials apart)",
