@@ -420,7 +420,13 @@ fn build_grid(
     )
     .map_err(|e| PhantomError::Setting {
         key: "size",
-        msg: e.to_string().replacen("phantom: ", "", 1),
+        // The message without the path, which the scene's error names.
+        msg: match e {
+            crate::volume::VolumeError::OverLimit { source, .. } => source.to_string(),
+            crate::volume::VolumeError::Format { msg, .. }
+            | crate::volume::VolumeError::TooLarge { msg, .. } => msg,
+            e => e.to_string(),
+        },
     })?;
     let scale = format.full_scale();
     let mut samples = vec![0.0f32; nx * ny * nz];
