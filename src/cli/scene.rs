@@ -26,7 +26,8 @@ pub struct Args {
     #[arg(short, long)]
     pub output: PathBuf,
     /// Iso-value of the surface (default: the first `snell info` suggests,
-    /// between the histogram's background and material modes).
+    /// the lowest boundary between the histogram's modes that wraps an
+    /// object rather than voids).
     #[arg(long, allow_negative_numbers = true)]
     pub iso: Option<f64>,
     /// Reconstruction filter: linear, catmull-rom, bspline2..bspline7,
