@@ -1413,6 +1413,29 @@ fn image_over_the_memory_limit_is_refused() {
     );
     assert!(!png.exists() && !hits.exists());
     assert_eq!(t.0.read_dir().unwrap().count(), 0, "nothing left behind");
+    // A part of that frame holds its region (and apron) only: 16² fits,
+    // 400² does not, and says it is a part.
+    let part = |png: &Path, region: &str| {
+        bin()
+            .env("SNELL_MEMORY_LIMIT", "8M")
+            .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
+            .arg(png)
+            .args(["--set", "image.width=1024", "--set", "image.height=1024"])
+            .args(["--region", region])
+            .output()
+            .unwrap()
+    };
+    let o = part(&png, "0,0,16,16");
+    assert!(o.status.success(), "{}", stderr(&o));
+    std::fs::remove_file(&png).unwrap();
+    assert_fails(
+        &part(&png, "0,0,400,400"),
+        &[
+            "a 400x400 part (region and apron) of a 1024x1024 image",
+            "lower the region",
+        ],
+    );
+    assert!(!png.exists());
     // 32² pixels (96 KiB) and the 64³ u8 phantom (4.3 MiB) fit.
     let (png, hits) = (t.path("small.png"), t.path("small.exr"));
     let o = render(&png, &hits, "32");

@@ -275,7 +275,12 @@ fn supersampled_colours_are_bitwise_identical_across_threads_and_tiles() {
         for tile in [7, 5, 32] {
             let mut tiled = scene.clone();
             tiled.render.tile = tile;
-            assert_eq!(one, run(2, &tiled), "{sampling}: tile 16 vs {tile}");
+            assert_eq!(
+                one,
+                run(2, &tiled),
+                "{sampling}: tile {} vs {tile}",
+                scene.render.tile
+            );
         }
     }
 }

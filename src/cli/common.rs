@@ -238,7 +238,21 @@ pub fn filter_kind(filter: &str, lambda: Option<f64>) -> anyhow::Result<FilterKi
 /// not use each said in a warning (a `render.step` under an octree, say):
 /// every command that reads a scene names them alike.
 pub fn load_scene(path: &Path, sets: &[String]) -> anyhow::Result<snell::scene::Scene> {
-    let scene = snell::scene::Scene::load(path, sets)?;
+    load_scene_as(path, sets, false)
+}
+
+/// [`load_scene`], or with `part` as one part of a frame
+/// ([`snell::scene::Scene::load_part`]).
+pub fn load_scene_as(
+    path: &Path,
+    sets: &[String],
+    part: bool,
+) -> anyhow::Result<snell::scene::Scene> {
+    let scene = if part {
+        snell::scene::Scene::load_part(path, sets)?
+    } else {
+        snell::scene::Scene::load(path, sets)?
+    };
     for w in scene.ignored_settings() {
         eprintln!("warning: {}: {w}", path.display());
     }

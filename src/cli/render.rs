@@ -12,7 +12,7 @@ use snell::render::{self, Prepared};
 use snell::scene::{Orbit, Scene};
 use snell::volume::LoadOptions;
 
-use super::common::{check_distinct, check_format, check_output, load_scene};
+use super::common::{check_distinct, check_format, check_output, load_scene_as};
 use super::progress::{self, Count, Step};
 
 #[derive(ClapArgs, Debug)]
@@ -75,7 +75,9 @@ pub struct Args {
 
 pub fn run(a: Args) -> anyhow::Result<()> {
     super::common::set_memory_limit(a.memory_limit.as_deref())?;
-    let scene = load_scene(&a.scene, &a.set)?;
+    // A part's frame may pass the memory limit as a whole: its own is
+    // checked below, once its window is known.
+    let scene = load_scene_as(&a.scene, &a.set, a.region.is_some())?;
     let outputs = Outputs::of(&a)?;
     // The image, hits, colour EXR, stats and timeline appear together when
     // the last is written, or not at all.
@@ -106,12 +108,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     // their count is known.
     let limit = snell::volume::limits::default_memory_limit();
     let workers = pool.current_num_threads().min(tiles.max(1));
-    scene.check_memory(limit, workers)?;
+    // A part holds its window (and apron) only.
+    let (w, h) = render::traced_size(&scene, window);
+    scene.check_memory(limit, workers, window.map(|_| (w, h)))?;
     // The volume and its structures get what the image leaves of the limit:
-    // each could pass alone where both together exceed it. A part holds
-    // its window (and apron) only.
-    let (frame_bytes, scratch_bytes) =
-        scene.memory_need_of(render::traced_pixels(&scene, window), workers);
+    // each could pass alone where both together exceed it.
+    let (frame_bytes, scratch_bytes) = scene.memory_need_of(u64::from(w) * u64::from(h), workers);
     let image_bytes = frame_bytes.saturating_add(scratch_bytes);
     let load = LoadOptions {
         memory_limit: limit.saturating_sub(image_bytes),

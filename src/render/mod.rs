@@ -104,11 +104,11 @@ fn post_mode(scene: &Scene) -> Option<prss::Mode> {
     }
 }
 
-/// How many pixels a render of `window` (the whole image for `None`) holds
-/// in its film: the window and its apron ([`traced_window`]).
-pub fn traced_pixels(scene: &Scene, window: Option<tile::Tile>) -> u64 {
+/// The size of the film a render of `window` (the whole image for `None`)
+/// holds: the window and its apron ([`traced_window`]).
+pub fn traced_size(scene: &Scene, window: Option<tile::Tile>) -> (u32, u32) {
     let t = traced_window(scene, window);
-    u64::from(t.width()) * u64::from(t.height())
+    (t.width(), t.height())
 }
 
 /// The pixels a render of `window` traces: the window and, when a post stage

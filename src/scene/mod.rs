@@ -190,19 +190,53 @@ impl Scene {
             .collect()
     }
 
-    /// Reads, overrides and validates a scene file.
+    /// Reads, overrides and validates a scene file, refusing a frame whose
+    /// buffers alone would pass the memory limit.
     pub fn load(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
+        Scene::load_checked(path, overrides, true)
+    }
+
+    /// [`Scene::load`] for a renderer of one part of the frame (`render
+    /// --region`): the whole frame's buffers may pass the memory limit, as
+    /// a frame split across machines does; the renderer checks its part's
+    /// ([`Scene::check_memory`] with its window).
+    pub fn load_part(path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
+        Scene::load_checked(path, overrides, false)
+    }
+
+    fn load_checked(path: &Path, overrides: &[String], frame: bool) -> Result<Scene, SceneError> {
         let text = crate::input::read_to_string(path).map_err(|source| SceneError::Io {
             path: path.to_path_buf(),
             source,
         })?;
-        Scene::parse(&text, path, overrides)
+        let scene = Scene::parse_unchecked(&text, path, overrides)?;
+        if frame {
+            scene.check_frame_memory()?;
+        }
+        Ok(scene)
     }
 
     /// Parses scene text; `path` is used for messages and relative paths.
     /// An error caused by a `--set` override names that override, not the
-    /// file.
+    /// file. A frame whose buffers alone would pass the memory limit is
+    /// refused, as [`Scene::load`] does.
     pub fn parse(text: &str, path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
+        let scene = Scene::parse_unchecked(text, path, overrides)?;
+        scene.check_frame_memory()?;
+        Ok(scene)
+    }
+
+    /// The frame's buffers and one tile's scratch, the least a render of
+    /// the whole frame needs, against the memory limit: so that whether a
+    /// scene file is accepted does not depend on the machine's cores; a
+    /// renderer checks again with its own thread count (`snell render` does
+    /// once its pool is built).
+    fn check_frame_memory(&self) -> Result<(), SceneError> {
+        self.memory_check(crate::volume::limits::default_memory_limit(), None, None)
+            .map_err(|e| blame_override(e, &self.overrides, &self.written, &self.file_keys))
+    }
+
+    fn parse_unchecked(text: &str, path: &Path, overrides: &[String]) -> Result<Scene, SceneError> {
         let mut table: toml::Table = text
             .parse()
             .map_err(|e: toml::de::Error| syntax_error(text, path, &e))?;
@@ -354,14 +388,9 @@ impl Scene {
         }
     }
 
-    /// Memory a render needs besides the volume: frame buffers for every
-    /// pixel, and one tile's ray packet per worker thread.
-    pub fn memory_need(&self, threads: usize) -> (u64, u64) {
-        self.memory_need_of(self.width as u64 * self.height as u64, threads)
-    }
-
-    /// [`Scene::memory_need`] of a film of `pixels` pixels (a `--region`
-    /// part's window and apron).
+    /// Memory a render needs besides the volume: frame buffers for the
+    /// `pixels` of its film (the whole image, or a `--region` part's window
+    /// and apron), and one tile's ray packet per worker thread.
     pub fn memory_need_of(&self, pixels: u64, threads: usize) -> (u64, u64) {
         let tile = self.render.tile as u64;
         let tile_rays = tile * tile * self.rays_per_pixel();
@@ -373,20 +402,30 @@ impl Scene {
 
     /// Refuses (before anything is allocated) a render whose frame buffers
     /// and tile scratch for `threads` worker threads would exceed `limit`
-    /// bytes. An error on a key a `--set` wrote names that `--set`.
-    pub fn check_memory(&self, limit: u64, threads: usize) -> Result<(), SceneError> {
-        self.memory_check(limit, Some(threads))
+    /// bytes; `part`: the size of the film a `--region` render holds (its
+    /// window and apron), `None` for the whole frame. An error on a key a
+    /// `--set` wrote names that `--set`.
+    pub fn check_memory(
+        &self,
+        limit: u64,
+        threads: usize,
+        part: Option<(u32, u32)>,
+    ) -> Result<(), SceneError> {
+        self.memory_check(limit, Some(threads), part)
             .map_err(|e| blame_override(e, &self.overrides, &self.written, &self.file_keys))
     }
 
-    /// [`Scene::check_memory`] with one thread, the least any render takes:
-    /// while the scene is read, before the thread count is known.
-    fn check_memory_least(&self, limit: u64) -> Result<(), SceneError> {
-        self.memory_check(limit, None)
-    }
-
-    fn memory_check(&self, limit: u64, threads: Option<usize>) -> Result<(), SceneError> {
-        let (frame, scratch) = self.memory_need(threads.unwrap_or(1));
+    fn memory_check(
+        &self,
+        limit: u64,
+        threads: Option<usize>,
+        part: Option<(u32, u32)>,
+    ) -> Result<(), SceneError> {
+        let pixels = match part {
+            Some((w, h)) => u64::from(w) * u64::from(h),
+            None => self.width as u64 * self.height as u64,
+        };
+        let (frame, scratch) = self.memory_need_of(pixels, threads.unwrap_or(1));
         let need = frame.saturating_add(scratch);
         if need <= limit {
             return Ok(());
@@ -401,9 +440,14 @@ impl Scene {
             }
             .into(),
             msg: format!(
-                "a {}x{} image at {} per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the size, render.samples, render.tile or --threads, or raise SNELL_MEMORY_LIMIT (--memory-limit)",
-                self.width,
-                self.height,
+                "{} at {} per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the {}, render.samples, render.tile or --threads, or raise SNELL_MEMORY_LIMIT (--memory-limit)",
+                match part {
+                    None => format!("a {}x{} image", self.width, self.height),
+                    Some((w, h)) => format!(
+                        "a {w}x{h} part (region and apron) of a {}x{} image",
+                        self.width, self.height
+                    ),
+                },
                 match self.rays_per_pixel() {
                     1 => "1 ray".to_string(),
                     n => format!("{n} rays"),
@@ -418,7 +462,8 @@ impl Scene {
                 },
                 self.render.tile,
                 self.render.tile,
-                hb(limit)
+                hb(limit),
+                if part.is_some() { "region" } else { "size" }
             ),
         })
     }

@@ -596,11 +596,6 @@ pub(super) fn resolve(
         backdrop_image,
         render,
     };
-    // One tile at a time, the least any render needs, so that whether a
-    // scene file is accepted does not depend on the machine's cores; a
-    // renderer checks again with its own thread count (`snell render` does
-    // once its pool is built).
-    scene.check_memory_least(crate::volume::limits::default_memory_limit())?;
     Ok(scene)
 }
 
