@@ -1394,42 +1394,36 @@ fn nan_samples_load_with_allow_nan() {
 fn image_over_the_memory_limit_is_refused() {
     let t = Tmp::new("memlimit");
     let (png, hits) = (t.path("big.png"), t.path("big.exr"));
-    let render = |png: &Path, hits: &Path, size: &str| {
-        bin()
+    // The sphere at `size`² pixels under an 8 MiB limit, writing `png`
+    // (and `hits`, when given), with `extra` arguments.
+    let render = |png: &Path, hits: Option<&Path>, size: u32, extra: &[&str]| {
+        let mut command = bin();
+        command
             .env("SNELL_MEMORY_LIMIT", "8M")
             .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
             .arg(png)
-            .arg("--hits")
-            .arg(hits)
             .args(["--set", &format!("image.width={size}")])
             .args(["--set", &format!("image.height={size}")])
-            .output()
-            .unwrap()
+            .args(extra);
+        if let Some(hits) = hits {
+            command.arg("--hits").arg(hits);
+        }
+        command.output().unwrap()
     };
     // 1024² pixels at 96 bytes of frame each: 96 MiB, over 8 MiB.
     assert_fails(
-        &render(&png, &hits, "1024"),
+        &render(&png, Some(&hits), 1024, &[]),
         &["[image]", "1024x1024", "8.0 MiB"],
     );
     assert!(!png.exists() && !hits.exists());
     assert_eq!(t.0.read_dir().unwrap().count(), 0, "nothing left behind");
     // A part of that frame holds its region (and apron) only: 16² fits,
     // 400² does not, and says it is a part.
-    let part = |png: &Path, region: &str| {
-        bin()
-            .env("SNELL_MEMORY_LIMIT", "8M")
-            .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
-            .arg(png)
-            .args(["--set", "image.width=1024", "--set", "image.height=1024"])
-            .args(["--region", region])
-            .output()
-            .unwrap()
-    };
-    let o = part(&png, "0,0,16,16");
+    let o = render(&png, None, 1024, &["--region", "0,0,16,16"]);
     assert!(o.status.success(), "{}", stderr(&o));
     std::fs::remove_file(&png).unwrap();
     assert_fails(
-        &part(&png, "0,0,400,400"),
+        &render(&png, None, 1024, &["--region", "0,0,400,400"]),
         &[
             "a 400x400 part (region and apron) of a 1024x1024 image",
             "lower the region",
@@ -1438,14 +1432,14 @@ fn image_over_the_memory_limit_is_refused() {
     assert!(!png.exists());
     // 32² pixels (96 KiB) and the 64³ u8 phantom (4.3 MiB) fit.
     let (png, hits) = (t.path("small.png"), t.path("small.exr"));
-    let o = render(&png, &hits, "32");
+    let o = render(&png, Some(&hits), 32, &[]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(png.exists() && hits.exists());
     // 256² pixels (6.4 MiB) fit alone, and so does the phantom, but not
     // both: the volume gets what the image leaves.
     let (png, hits) = (t.path("both.png"), t.path("both.exr"));
     assert_fails(
-        &render(&png, &hits, "256"),
+        &render(&png, Some(&hits), 256, &[]),
         &[
             "64x64x64 volume needs about 4.2 MiB",
             "the memory limit of 8.0 MiB less the 6.4 MiB the 256x256 image takes",
@@ -1453,16 +1447,8 @@ fn image_over_the_memory_limit_is_refused() {
     );
     assert!(!png.exists() && !hits.exists());
     // The same when a `--set` sized the volume and the error names it.
-    let o = bin()
-        .env("SNELL_MEMORY_LIMIT", "8M")
-        .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
-        .arg(&png)
-        .args(["--set", "image.width=256", "--set", "image.height=256"])
-        .args(["--set", "volume.phantom.size=64"])
-        .output()
-        .unwrap();
     assert_fails(
-        &o,
+        &render(&png, None, 256, &["--set", "volume.phantom.size=64"]),
         &[
             "--set volume.phantom.size=64: a 64x64x64 volume needs about 4.2 MiB",
             "the memory limit of 8.0 MiB less the 6.4 MiB the 256x256 image takes",
