@@ -143,7 +143,7 @@ fn run_peer(a: &Args, name: &str) -> anyhow::Result<()> {
         anyhow::bail!("--peer-size must be at least 1");
     }
     eprintln!(
-        "snell bench --peer {name}: snell and {name} on the glass sphere at {s}x{s}, {} threads each, one warm-up and {} timed runs per row, round-robin (about a minute at 512x512 on 2 cores).",
+        "snell bench --peer {name}: snell and {name} on the glass sphere at {s}x{s}, {} threads each, one warm-up and {} timed runs per row, round-robin (under a minute at 512x512 on 2 cores).",
         opts.threads,
         opts.repeats,
         s = opts.size

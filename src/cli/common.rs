@@ -238,25 +238,23 @@ pub fn filter_kind(filter: &str, lambda: Option<f64>) -> anyhow::Result<FilterKi
 /// not use each said in a warning (a `render.step` under an octree, say):
 /// every command that reads a scene names them alike.
 pub fn load_scene(path: &Path, sets: &[String]) -> anyhow::Result<snell::scene::Scene> {
-    load_scene_as(path, sets, false)
+    Ok(warn_ignored(path, snell::scene::Scene::load(path, sets)?))
 }
 
-/// [`load_scene`], or with `part` as one part of a frame
-/// ([`snell::scene::Scene::load_part`]).
-pub fn load_scene_as(
-    path: &Path,
-    sets: &[String],
-    part: bool,
-) -> anyhow::Result<snell::scene::Scene> {
-    let scene = if part {
-        snell::scene::Scene::load_part(path, sets)?
-    } else {
-        snell::scene::Scene::load(path, sets)?
-    };
+/// [`load_scene`] for one part of a frame (`render --region`), held to the
+/// memory limit for its part alone ([`snell::scene::Scene::load_part`]).
+pub fn load_scene_part(path: &Path, sets: &[String]) -> anyhow::Result<snell::scene::Scene> {
+    Ok(warn_ignored(
+        path,
+        snell::scene::Scene::load_part(path, sets)?,
+    ))
+}
+
+fn warn_ignored(path: &Path, scene: snell::scene::Scene) -> snell::scene::Scene {
     for w in scene.ignored_settings() {
         eprintln!("warning: {}: {w}", path.display());
     }
-    Ok(scene)
+    scene
 }
 
 /// Most worker threads a command starts: far above any core count snell

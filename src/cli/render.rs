@@ -12,7 +12,7 @@ use snell::render::{self, Prepared};
 use snell::scene::{Orbit, Scene};
 use snell::volume::LoadOptions;
 
-use super::common::{check_distinct, check_format, check_output, load_scene_as};
+use super::common::{check_distinct, check_format, check_output, load_scene, load_scene_part};
 use super::progress::{self, Count, Step};
 
 #[derive(ClapArgs, Debug)]
@@ -77,7 +77,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     super::common::set_memory_limit(a.memory_limit.as_deref())?;
     // A part's frame may pass the memory limit as a whole: its own is
     // checked below, once its window is known.
-    let scene = load_scene_as(&a.scene, &a.set, a.region.is_some())?;
+    let scene = if a.region.is_some() {
+        load_scene_part(&a.scene, &a.set)?
+    } else {
+        load_scene(&a.scene, &a.set)?
+    };
     let outputs = Outputs::of(&a)?;
     // The image, hits, colour EXR, stats and timeline appear together when
     // the last is written, or not at all.

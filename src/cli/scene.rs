@@ -171,7 +171,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 .unwrap_or(0.5 * (stats.min + stats.max));
             if stats.iso_from_modes {
                 eprintln!(
-                    "iso {} (the outermost boundary between the histogram's modes that wraps an object; `snell info` lists the others; --iso chooses)",
+                    "iso {} (the lowest boundary between the histogram's modes that wraps an object rather than voids; `snell info` lists the others; --iso chooses)",
                     num(iso)
                 );
             } else {
