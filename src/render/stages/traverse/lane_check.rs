@@ -1,17 +1,18 @@
 //! The check every lane walk passes: each ray visits the same cells and
 //! hands the same segment bits to the solve as the scalar walk
 //! ([`super::walk_interleaved`]), over octree blocks, DDA cells and distance
-//! cubes (shared by [`super::wide`] and [`super::avx2`]).
+//! cubes, for each instruction set of [`super::lanes`].
 
 use std::sync::Arc;
 
 use bumpalo::Bump;
 use glam::DVec3;
 
-use super::{DistanceCubes, OctreeBlocks, walk_interleaved};
+use super::cell::AXIS_SPAN;
+use super::lanes::{LaneIsa, MAX_LANES, SPAN_ROWS, axis_span, distance_layout_fits, layout_fits};
+use super::{DistanceCubes, OctreeBlocks, clamped_floor, walk_interleaved};
 use crate::classify::Method;
-use crate::filter::coeffs::Coefficient;
-use crate::octree::Octree;
+use crate::classify::bezier::SUB;
 use crate::octree::distance::Proximity;
 use crate::phantom::{mix64, uniform};
 use crate::prepare::Prepared;
@@ -21,36 +22,15 @@ use crate::render::stats::Counters;
 use crate::render::testing::{scrambled_ball, small_scene};
 use crate::with_field;
 
-/// A lane walk under test.
-pub(super) trait LaneWalk {
-    /// The octree (or DDA) walk.
-    ///
-    /// # Safety
-    /// [`LaneWalk::fits`] holds.
-    unsafe fn octree<T: Coefficient>(
-        ctx: &Ctx<T>,
-        tree: (&Octree, u32),
-        rays: &mut Rays,
-        input: &[u32],
-        solve: &mut Queue,
-        record: &mut Queue,
-        c: &mut Counters,
-    );
-    /// The distance-cube walk.
-    ///
-    /// # Safety
-    /// [`LaneWalk::fits_distance`] holds.
-    unsafe fn distance<T: Coefficient>(
-        ctx: &Ctx<T>,
-        p: &Proximity,
-        rays: &mut Rays,
-        input: &[u32],
-        solve: &mut Queue,
-        record: &mut Queue,
-        c: &mut Counters,
-    );
-    fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool;
-    fn fits_distance<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) -> bool;
+/// Every check of the lane walk for instruction set `S` (whose features the
+/// CPU has): the walk against the scalar walk, with the octree's blocks
+/// read from the brick levels and from the byte map, then its spans and
+/// conversions against the scalar walk's.
+pub(super) fn check_isa<S: LaneIsa>() {
+    every_ray_walks_as_in_the_scalar_walk::<S>(true);
+    every_ray_walks_as_in_the_scalar_walk::<S>(false);
+    spans_are_the_table_of_the_scalar_walk::<S>();
+    conversions_are_the_scalar_ones::<S>();
 }
 
 /// Rays from random points of (and around) the domain in random
@@ -62,7 +42,7 @@ pub(super) trait LaneWalk {
 /// and segment bits, and count the same visits and sub-cell skips —
 /// over octree blocks, DDA cells, and distance cubes (octant and
 /// centred maps).
-pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
+fn every_ray_walks_as_in_the_scalar_walk<S: LaneIsa>(brick_levels: bool) {
     let odd = [0.0, -0.0, 1e-300, -1e-300, f64::NAN];
     // Segments the planes passed over, by traversal (the scalar walk's
     // skips with planes less its skips without).
@@ -91,7 +71,10 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
             let Skip::Octree { tree, leaf_level } = &ctx.skip else {
                 panic!("{traversal} walks the octree");
             };
-            assert!(W::fits(&ctx, tree), "{traversal} {method:?}");
+            assert!(layout_fits(&ctx, tree), "{traversal} {method:?}");
+            // The brick levels are read only with the index's own words.
+            let words = tree.brick_tag_words();
+            assert!(ctx.masks.is_none_or(|m| std::ptr::eq(m.parts().0.words().0.as_ptr(), words.as_ptr())));
             assert_eq!(ctx.masks.is_some(), method.has_masks());
             // Planes come with masks: the walks' plane tests are compared
             // too (and below, shown to pass segments over).
@@ -103,7 +86,7 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
             let cubes = budget.map(|b| Proximity::build_within(tree.tags(), b));
             if let Some(p) = &cubes {
                 assert_eq!(p.is_octant(), budget > Some(0));
-                assert!(W::fits_distance(&ctx, p));
+                assert!(distance_layout_fits(&ctx, p));
             }
             // The scalar walk and the lane walk over the same space.
             let scalar = |rays: &mut Rays, input: &[u32], s: &mut Queue, r: &mut Queue, c: &mut Counters| {
@@ -116,11 +99,12 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
                 }
             };
             let lanes = |rays: &mut Rays, input: &[u32], s: &mut Queue, r: &mut Queue, c: &mut Counters| {
-                // SAFETY: `fits` and `fits_distance` hold.
+                // SAFETY: the CPU has the features (the caller's contract);
+                // the layouts fit.
                 unsafe {
                     match &cubes {
-                        Some(p) => W::distance(&ctx, p, rays, input, s, r, c),
-                        None => W::octree(&ctx, (tree, *leaf_level), rays, input, s, r, c),
+                        Some(p) => S::distance(&ctx, p, rays, input, s, r, c),
+                        None => S::octree(&ctx, (tree, *leaf_level), brick_levels, rays, input, s, r, c),
                     }
                 }
             };
@@ -220,5 +204,87 @@ pub(super) fn every_ray_walks_as_in_the_scalar_walk<W: LaneWalk>() {
             passed.get(traversal).is_some_and(|&n| n > 0),
             "{traversal}: {passed:?}"
         );
+    }
+}
+
+/// The shifted spans are the scalar walk's table.
+fn spans_are_the_table_of_the_scalar_walk<S: LaneIsa>() {
+    for (a, &(rep, log)) in SPAN_ROWS.iter().enumerate() {
+        for lo in 0..SUB {
+            for hi in lo..SUB {
+                // SAFETY: the CPU has the features (the caller's contract).
+                let got = unsafe {
+                    let v = axis_span::<S>(rep, log, S::splat_i(lo as i64), S::splat_i(hi as i64));
+                    let mut out = [0; MAX_LANES];
+                    S::store_i(v, &mut out);
+                    out[S::LANES - 1] as u64
+                };
+                assert_eq!(got, AXIS_SPAN[a][lo][hi], "axis {a} {lo}..={hi}");
+            }
+        }
+    }
+}
+
+/// The conversions' edge cases: the exact integer conversion at zero,
+/// negatives and large values, and the clamped floor at integers, just
+/// off them, NaN and infinities, against the scalar walk's; the population
+/// count.
+fn conversions_are_the_scalar_ones<S: LaneIsa>() {
+    let ints = [
+        0i64,
+        1,
+        -1,
+        7,
+        -8,
+        1 << 40,
+        -(1 << 40),
+        (1 << 51) - 1,
+        -(1 << 51) + 1,
+    ];
+    let last = S::LANES - 1;
+    for &x in &ints {
+        let mut out = [0.0; MAX_LANES];
+        // SAFETY: as above.
+        unsafe { S::store(S::to_f(S::splat_i(x)), &mut out) };
+        assert_eq!(out[last].to_bits(), (x as f64).to_bits(), "{x}");
+    }
+    let xs = [
+        0.0,
+        -0.0,
+        0.5,
+        1.0,
+        1.0 - 1e-16,
+        2.999_999_999,
+        3.0,
+        3.5,
+        -0.3,
+        -5.0,
+        f64::NAN,
+        f64::INFINITY,
+        f64::NEG_INFINITY,
+        1e300,
+    ];
+    for &x in &xs {
+        for (lo, hi) in [(0.0, 3.0), (2.0, 2.0), (-1.0, -1.0), (0.0, 1e6), (5.0, 9.0)] {
+            let mut out = [0; MAX_LANES];
+            // SAFETY: as above.
+            unsafe {
+                let v = S::clamped_floor(S::splat(x), S::splat(lo), S::splat(hi));
+                S::store_i(v, &mut out);
+            }
+            assert_eq!(out[last], clamped_floor(x, lo, hi), "{x} in [{lo}, {hi}]");
+        }
+    }
+    for v in [
+        0u64,
+        1,
+        u64::MAX,
+        0x8000_0000_0000_0001,
+        0x0123_4567_89ab_cdef,
+    ] {
+        let mut out = [0; MAX_LANES];
+        // SAFETY: as above.
+        unsafe { S::store_i(S::popcnt(S::splat_i(v as i64)), &mut out) };
+        assert_eq!(out[last] as u64, v.count_ones() as u64, "{v:x}");
     }
 }

@@ -10,7 +10,7 @@
 //!   ([`crate::octree::distance`]), which reach further than aligned blocks.
 //!
 //! With AVX-512 every cell walk runs eight rays at a time ([`wide`]), with
-//! AVX2 four ([`avx2`]); the scalar walks below are the reference both are
+//! AVX2 four ([`avx2`]), both the one lane walk ([`lanes`]); the scalar walks below are the reference both are
 //! tested against, and the path on other CPUs. All of them step through
 //! the lattice with [`cell`]'s geometry: a ray's exit from a cell, a box or
 //! a block, and its segment's test against a cell's tagged sub-cells.
@@ -20,6 +20,8 @@ pub mod avx2;
 mod cell;
 #[cfg(all(test, target_arch = "x86_64"))]
 mod lane_check;
+#[cfg(target_arch = "x86_64")]
+pub(crate) mod lanes;
 #[cfg(target_arch = "x86_64")]
 pub mod wide;
 
@@ -62,7 +64,15 @@ pub fn traverse<const S: usize, T: Coefficient>(
                 if wide::fits(ctx, tree) {
                     // SAFETY: `fits` checked the CPU's features and the maps.
                     unsafe {
-                        wide::walk_octree(ctx, (tree, *leaf_level), rays, input, solve, record, c)
+                        lanes::walk_octree::<wide::Avx512, _>(
+                            ctx,
+                            (tree, *leaf_level),
+                            rays,
+                            input,
+                            solve,
+                            record,
+                            c,
+                        )
                     };
                     return;
                 }
@@ -70,7 +80,15 @@ pub fn traverse<const S: usize, T: Coefficient>(
                 if avx2::fits(ctx, tree) {
                     // SAFETY: `fits` checked the CPU's features and the maps.
                     unsafe {
-                        avx2::walk_octree(ctx, (tree, *leaf_level), rays, input, solve, record, c)
+                        lanes::walk_octree::<avx2::Avx2, _>(
+                            ctx,
+                            (tree, *leaf_level),
+                            rays,
+                            input,
+                            solve,
+                            record,
+                            c,
+                        )
                     };
                     return;
                 }
@@ -85,13 +103,19 @@ pub fn traverse<const S: usize, T: Coefficient>(
                 if wide::fits_distance(ctx, p) {
                     // SAFETY: `fits_distance` checked the CPU's features and
                     // the maps.
-                    unsafe { wide::walk_distance(ctx, p, rays, input, solve, record, c) };
+                    unsafe {
+                        lanes::walk_distance::<wide::Avx512, _>(
+                            ctx, p, rays, input, solve, record, c,
+                        )
+                    };
                     return;
                 }
                 #[cfg(target_arch = "x86_64")]
                 if avx2::fits_distance(ctx, p) {
                     // SAFETY: as above.
-                    unsafe { avx2::walk_distance(ctx, p, rays, input, solve, record, c) };
+                    unsafe {
+                        lanes::walk_distance::<avx2::Avx2, _>(ctx, p, rays, input, solve, record, c)
+                    };
                     return;
                 }
                 crate::with_isa!(crate::simd::Isa::current(), _L, _M => walk_interleaved(ctx, DistanceCubes::new(p), rays, input, solve, record, c));
