@@ -1,5 +1,6 @@
 //! The lane walk ([`super::lanes`]) four rays at a time, for CPUs with
-//! AVX2 but without AVX-512.
+//! AVX2 that cannot run the AVX-512 walk (no AVX-512, or no VPOPCNTDQ),
+//! and under `SNELL_ISA=avx2`.
 //!
 //! Without it such CPUs walked one ray at a time ([`super::walk_interleaved`]),
 //! and the walk was the frame's largest stage: on an AVX2-only AMD EPYC,
@@ -99,9 +100,11 @@ unsafe fn narrow(m: __m256i) -> __m128i {
     }
 }
 
-// SAFETY (every method): called only from functions compiled with the
-// features (`LaneIsa::walk` below), as the trait requires.
-impl LaneIsa for Avx2 {
+// SAFETY: four lanes, at most `MAX_LANES`; the gathers are masked and
+// `expand` loads four values. Every method is called only from the walk
+// methods below, compiled with the features, or from the lane check on a
+// CPU that has them.
+unsafe impl LaneIsa for Avx2 {
     const LANES: usize = 4;
     type F = __m256d;
     type I = __m256i;
@@ -339,8 +342,11 @@ mod tests {
     /// AVX-512 walk.
     #[test]
     fn lanes_are_the_scalar_walk() {
-        if !std::arch::is_x86_feature_detected!("avx2")
-            || !std::arch::is_x86_feature_detected!("bmi2")
+        if !(std::arch::is_x86_feature_detected!("avx2")
+            && std::arch::is_x86_feature_detected!("bmi1")
+            && std::arch::is_x86_feature_detected!("bmi2")
+            && std::arch::is_x86_feature_detected!("popcnt")
+            && std::arch::is_x86_feature_detected!("lzcnt"))
         {
             return;
         }

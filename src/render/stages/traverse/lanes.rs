@@ -8,8 +8,9 @@
 //! the cell, the skip byte, for a tagged cell its segment and sub-cell
 //! test, and the exit from the cell or block, with branches the hardware
 //! cannot predict. Here the lanes step together: each of those operations
-//! is one vector instruction for all lanes, the loads are gathers, and
-//! every per-lane choice is a mask. A lane whose walk ends, at a candidate
+//! is a vector instruction for all lanes (with AVX-512; AVX2 builds a few,
+//! such as the population count, from short sequences), the loads are
+//! gathers, and every per-lane choice is a mask. A lane whose walk ends, at a candidate
 //! cell (to the solve queue) or out of its piece (to the record queue), is
 //! refilled with the next ray at once; two groups of lanes step in turn,
 //! so one group's arithmetic fills the other's wait on its gathers (9.3 ns
@@ -65,15 +66,20 @@ const _: () = assert!(SUB == 4, "the span masks below assume 4³ sub-cells");
 /// The vector operations the walk is written in, for one instruction set:
 /// `F` holds a `f64` per lane, `I` an `i64`, `M` a lane mask. Each
 /// operation is the one instruction (or the shortest sequence) the set has
-/// for it, with the scalar walk's semantics; the methods are
-/// `#[inline(always)]` in every implementation and only ever run inside
-/// functions compiled with the set's features: the three walk methods,
-/// which each implementation takes from [`walk_methods`] with its
-/// features.
+/// for it, with the scalar walk's semantics. The operations are
+/// `#[inline(always)]` in every implementation, so they compile into the
+/// functions with the set's features that call them: the three walk
+/// methods, which each implementation takes from [`walk_methods`] with its
+/// features (and, for AVX-512, the staging and the refract stage's
+/// clearing). The lane check (`lane_check.rs`) calls them from plain test
+/// functions, on a CPU it has checked.
 ///
 /// # Safety
-/// Every method requires the CPU features of its implementation.
-pub(crate) trait LaneIsa: Copy + Sized + 'static {
+/// Calling any method requires the CPU features of its implementation.
+/// Implementing the trait promises `LANES ≤ MAX_LANES`, that a gather
+/// reads only the lanes of its mask, and that `expand` reads `LANES`
+/// values: the walk's loads rely on them.
+pub(crate) unsafe trait LaneIsa: Copy + Sized + 'static {
     /// Lanes per vector (at most [`MAX_LANES`]).
     const LANES: usize;
     /// The bit set of all lanes.
@@ -366,7 +372,9 @@ impl Staged {
     }
 
     /// Stages `input`'s rays one at a time, exactly as the scalar walk
-    /// starts them ([`super::walk_start`], the same function).
+    /// starts them ([`super::walk_start`], the same function). Inlined
+    /// into the walk, under its features.
+    #[inline(always)]
     pub(super) fn stage_scalar<T: Coefficient>(
         &mut self,
         ctx: &Ctx<T>,
@@ -531,7 +539,7 @@ impl<S: LaneIsa> SkipBytes<S> for ByteMap<'_> {
 }
 
 /// The octree's levels per brick ([`Octree::brick_levels`]) with the
-/// bricks' tag words ([`Octree::brick_tags`]): for a large lattice, whose
+/// bricks' tag words ([`Octree::brick_tag_words`]): for a large lattice, whose
 /// byte map the walk's gathers read far out of cache, the same bytes from
 /// a byte per 64 cells (the teapot's 180 KB, in cache) and the tag words
 /// (a bit per cell), which the tagged-cell test reads anyway and so
@@ -1004,6 +1012,7 @@ unsafe fn step<S: LaneIsa, R: LaneReach<S>>(
 /// it has left (the lowest free lanes first); returns the lanes filled.
 #[inline(always)]
 unsafe fn refill<S: LaneIsa>(l: &mut Lanes<S>, free: u32, staged: &Staged, pos: &mut usize) -> u32 {
+    const { assert!(S::LANES <= MAX_LANES) };
     // SAFETY: called only from the walk, which runs with the features
     // (BMI2 among them); memory accesses are marked below.
     unsafe {
@@ -1035,9 +1044,10 @@ unsafe fn refill<S: LaneIsa>(l: &mut Lanes<S>, free: u32, staged: &Staged, pos: 
 }
 
 /// Lane groups in flight, stepped in turn so one group's arithmetic fills
-/// the other's wait on its gathers (more spill: with eight lanes a group
-/// holds 16 vectors, and two take the 32 registers; three and four groups
-/// measured slower on the lobster, BENCHMARKS.md).
+/// the other's wait on its gathers. With AVX-512 a group holds 16 vectors
+/// and two take the 32 registers; three and four groups measured slower on
+/// the lobster, and four no faster with AVX2, whose 16 registers two
+/// groups already overflow (BENCHMARKS.md).
 const GROUPS: usize = 2;
 
 /// The walk of every ray of `input` to its next candidate cell (pushed on

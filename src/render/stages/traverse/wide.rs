@@ -48,8 +48,9 @@ pub fn available() -> bool {
 }
 
 /// Whether the wide walk can run over `tree` in `ctx`: the CPU has the
-/// features ([`available`]), and the skip map and the sub-cell masks'
-/// index cover the lattice in one brick layout.
+/// features ([`available`]), and the skip map, brick levels, tag words
+/// and the sub-cell masks' index cover the lattice in one brick layout
+/// ([`lanes::layout_fits`]).
 pub fn fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
     available() && lanes::layout_fits(ctx, tree)
 }
@@ -122,10 +123,11 @@ impl Lanes {
     }
 }
 
-// SAFETY (every method): called only from functions compiled with the
-// features (`LaneIsa::walk` below and the refract stage's clearing), as
-// the trait requires.
-impl LaneIsa for Avx512 {
+// SAFETY: eight lanes, at most `MAX_LANES`; the gathers are masked and
+// `expand` loads eight values. Every method is called only from functions
+// compiled with the features (the walk methods below, `stage`, and the
+// refract stage's clearing) or from the lane check on a CPU that has them.
+unsafe impl LaneIsa for Avx512 {
     const LANES: usize = 8;
     type F = __m512d;
     type I = __m512i;
