@@ -708,8 +708,8 @@ unsafe fn bricked_index<S: LaneIsa>(bricks: &[S::I; 2], cell: &[S::I; 3]) -> S::
     unsafe {
         let [x, y, z] = *cell;
         let (two, three) = (S::splat_i(2), S::splat_i(3));
-        // Brick counts and brick coordinates are below 2³²: the small
-        // multiplies are exact.
+        // The factors are below 2³² (`small_factors`, which the layout
+        // checks hold): the small multiplies are exact.
         let brick = S::add_i(
             S::shr(x, two),
             S::mul_small(
@@ -1270,6 +1270,15 @@ fn masks_fit<T: Coefficient>(ctx: &Ctx<T>, bricked: Bricked) -> bool {
     })
 }
 
+/// Whether [`bricked_index`]'s factors stay below 2³², as
+/// [`LaneIsa::mul_small`] needs: the bricks along x, and a brick's index
+/// within its x row, below the bricks along y times those along z (true of
+/// any lattice that fits in memory: 2³² bricks are 2³⁸ cells).
+fn small_factors(bricked: Bricked) -> bool {
+    let [bx, by, bz] = bricked.bricks();
+    bx < 1 << 32 && by.saturating_mul(bz) <= 1 << 32
+}
+
 /// Whether a lane walk can run over `tree` in `ctx`, whatever the CPU: the
 /// octree's skip map, brick levels and tag words and the masks' index
 /// cover the lattice in one brick layout.
@@ -1280,6 +1289,7 @@ pub(super) fn layout_fits<T: Coefficient>(ctx: &Ctx<T>, tree: &Octree) -> bool {
         && tree.brick_levels().len().is_multiple_of(4)
         && tree.brick_tag_words().len() * 64 == tree.bricked().len()
         && masks_fit(ctx, tree.bricked())
+        && small_factors(tree.bricked())
 }
 
 /// [`layout_fits`] for the distance cubes of `p`: the maps (eight
@@ -1293,6 +1303,7 @@ pub(super) fn distance_layout_fits<T: Coefficient>(ctx: &Ctx<T>, p: &Proximity) 
         && stride == if centred { 0 } else { bricked.len() }
         && bytes.len() == maps * bricked.len()
         && masks_fit(ctx, bricked)
+        && small_factors(bricked)
 }
 
 /// The tagged cells' records (mask and plane) and the planes' margin, as
