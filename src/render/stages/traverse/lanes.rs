@@ -72,7 +72,11 @@ const _: () = assert!(SUB == 4, "the span masks below assume 4³ sub-cells");
 /// methods, which each implementation takes from [`walk_methods`] with its
 /// features (and, for AVX-512, the staging and the refract stage's
 /// clearing). The lane check (`lane_check.rs`) calls them from plain test
-/// functions, on a CPU it has checked.
+/// functions, on a CPU it has checked. On the walk's hot path, code
+/// between them is written without closures: a closure does not take its
+/// caller's features, and the compiler need not inline it (a walk that
+/// grew once left the AVX-512 planes' closure out of line, its operations
+/// calls, and the distance walk ran 3× slower).
 ///
 /// # Safety
 /// Calling any method requires the CPU features of its implementation.
@@ -372,9 +376,10 @@ impl Staged {
     }
 
     /// Stages `input`'s rays one at a time, exactly as the scalar walk
-    /// starts them ([`super::walk_start`], the same function). Inlined
-    /// into the walk, under its features.
-    #[inline(always)]
+    /// starts them ([`super::walk_start`], the same function). Kept out of
+    /// the walk's loop: scalar code needs none of its features, and a
+    /// larger walk can leave the compiler inlining less of it.
+    #[inline(never)]
     pub(super) fn stage_scalar<T: Coefficient>(
         &mut self,
         ctx: &Ctx<T>,
@@ -796,8 +801,10 @@ unsafe fn may_meet<S: LaneIsa>(l: &Lanes<S>, t0: S::F, t1: S::F, mask: S::I) -> 
         let mut bbox = all;
         for a in 0..3 {
             let cf = S::to_f(l.cell[a]);
-            let local = |t: S::F| S::mul(n, S::sub(S::add(l.ou[a], S::mul(t, l.du[a])), cf));
-            let (v0, v1) = (local(t0), local(t1));
+            let (v0, v1) = (
+                S::mul(n, S::sub(S::add(l.ou[a], S::mul(t0, l.du[a])), cf)),
+                S::mul(n, S::sub(S::add(l.ou[a], S::mul(t1, l.du[a])), cf)),
+            );
             let (lo, hi) = (S::min(v0, v1), S::max(v0, v1));
             let lo = S::clamped_floor(S::sub(lo, eps), zero, last);
             let hi = S::clamped_floor(S::add(hi, eps), zero, last);
@@ -1026,18 +1033,16 @@ unsafe fn refill<S: LaneIsa>(l: &mut Lanes<S>, free: u32, staged: &Staged, pos: 
         let e = S::expander(take);
         // SAFETY (all loads): `p < staged.len ≤ CHUNK`, and every column holds
         // `CHUNK + MAX_LANES` values.
-        let pd = |old: S::F, col: &Col<f64>| S::expand(old, e, col.as_ptr().add(p));
-        let epi = |old: S::I, col: &Col<i64>| S::expand_i(old, e, col.as_ptr().add(p));
-        l.r = epi(l.r, &staged.r);
+        l.r = S::expand_i(l.r, e, staged.r.as_ptr().add(p));
         for a in 0..3 {
-            l.ou[a] = pd(l.ou[a], &staged.ou[a]);
-            l.du[a] = pd(l.du[a], &staged.du[a]);
-            l.inv[a] = pd(l.inv[a], &staged.inv[a]);
-            l.cell[a] = epi(l.cell[a], &staged.cell[a]);
+            l.ou[a] = S::expand(l.ou[a], e, staged.ou[a].as_ptr().add(p));
+            l.du[a] = S::expand(l.du[a], e, staged.du[a].as_ptr().add(p));
+            l.inv[a] = S::expand(l.inv[a], e, staged.inv[a].as_ptr().add(p));
+            l.cell[a] = S::expand_i(l.cell[a], e, staged.cell[a].as_ptr().add(p));
         }
-        l.t = pd(l.t, &staged.t);
-        l.t_start = pd(l.t_start, &staged.t_start);
-        l.t_end = pd(l.t_end, &staged.t_end);
+        l.t = S::expand(l.t, e, staged.t.as_ptr().add(p));
+        l.t_start = S::expand(l.t_start, e, staged.t_start.as_ptr().add(p));
+        l.t_end = S::expand(l.t_end, e, staged.t_end.as_ptr().add(p));
         *pos += take.count_ones() as usize;
         take
     }

@@ -74,6 +74,16 @@ pub(crate) unsafe fn exit_box(
     unsafe { lanes::exit_box(l, lo, hi) }
 }
 
+/// `col[r]` in the lanes of `m`, 0 in the others.
+///
+/// # Safety
+/// AVX-512 F; every lane of `m` indexes `col`.
+#[inline(always)]
+unsafe fn gather_pd(col: &[f64], r: __m512i, m: __mmask8) -> __m512d {
+    // SAFETY: the caller's contract.
+    unsafe { _mm512_mask_i64gather_pd::<8>(_mm512_setzero_pd(), m, r, col.as_ptr()) }
+}
+
 impl Lanes {
     /// The rays `r` (lanes of `m`; the others zero) as [`super::cell_ray`]
     /// puts them in cell coordinates — scaled, then offset, no fused
@@ -92,9 +102,6 @@ impl Lanes {
     ) -> Lanes {
         // SAFETY: the caller's contract.
         unsafe {
-            let pd = |col: &[f64]| {
-                _mm512_mask_i64gather_pd::<8>(_mm512_setzero_pd(), m, r, col.as_ptr())
-            };
             let off = _mm512_set1_pd(ctx.lattice.offset);
             let mut l = Lanes {
                 r,
@@ -102,15 +109,15 @@ impl Lanes {
                 du: [_mm512_setzero_pd(); 3],
                 inv: [_mm512_setzero_pd(); 3],
                 cell: [_mm512_setzero_si512(); 3],
-                t: pd(&rays.t),
-                t_start: pd(&rays.t_start),
-                t_end: pd(&rays.t_end),
+                t: gather_pd(&rays.t, r, m),
+                t_start: gather_pd(&rays.t_start, r, m),
+                t_end: gather_pd(&rays.t_end, r, m),
             };
             for a in 0..3 {
                 let sa = _mm512_set1_pd(ctx.inv_spacing[a]);
-                l.ou[a] = _mm512_add_pd(_mm512_mul_pd(pd(&rays.org[a]), sa), off);
-                l.du[a] = _mm512_mul_pd(pd(&rays.dir[a]), sa);
-                l.inv[a] = pd(&rays.cell_inv[a]);
+                l.ou[a] = _mm512_add_pd(_mm512_mul_pd(gather_pd(&rays.org[a], r, m), sa), off);
+                l.du[a] = _mm512_mul_pd(gather_pd(&rays.dir[a], r, m), sa);
+                l.inv[a] = gather_pd(&rays.cell_inv[a], r, m);
                 l.cell[a] = _mm512_cvtepi32_epi64(_mm512_mask_i64gather_epi32::<4>(
                     _mm256_setzero_si256(),
                     m,
@@ -120,6 +127,29 @@ impl Lanes {
             }
             l
         }
+    }
+}
+
+/// The plane `p` (offset, then the gradient's three components) at
+/// parameter `t` of each lane's ray, in its cell's coordinates, as
+/// [`crate::classify::PlaneBounds::clears`] evaluates it (a function, not
+/// a closure: see [`LaneIsa`]).
+///
+/// # Safety
+/// AVX-512 F and DQ.
+#[inline(always)]
+unsafe fn plane_at(p: &[__m512d; 6], l: &Lanes, t: __m512d) -> __m512d {
+    // SAFETY: the caller's contract.
+    unsafe {
+        let mut v = p[0];
+        for a in 0..3 {
+            let u = _mm512_sub_pd(
+                _mm512_add_pd(l.ou[a], _mm512_mul_pd(t, l.du[a])),
+                _mm512_cvtepi64_pd(l.cell[a]),
+            );
+            v = _mm512_add_pd(v, _mm512_mul_pd(p[1 + a], u));
+        }
+        v
     }
 }
 
@@ -384,20 +414,9 @@ unsafe impl LaneIsa for Avx512 {
                     _mm512_castps_pd(split),
                 )));
             }
-            let at = |t: __m512d| {
-                let mut v = p[0];
-                for a in 0..3 {
-                    let u = _mm512_sub_pd(
-                        _mm512_add_pd(l.ou[a], _mm512_mul_pd(t, l.du[a])),
-                        _mm512_cvtepi64_pd(l.cell[a]),
-                    );
-                    v = _mm512_add_pd(v, _mm512_mul_pd(p[1 + a], u));
-                }
-                v
-            };
             let e = _mm512_add_pd(p[4], _mm512_set1_pd(margin));
             let ne = _mm512_sub_pd(_mm512_setzero_pd(), e);
-            let (v0, v1) = (at(t0), at(t1));
+            let (v0, v1) = (plane_at(&p, l, t0), plane_at(&p, l, t1));
             let above =
                 _mm512_cmp_pd_mask::<_CMP_GT_OQ>(v0, e) & _mm512_cmp_pd_mask::<_CMP_GT_OQ>(v1, e);
             let below =
