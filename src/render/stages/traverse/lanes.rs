@@ -75,8 +75,8 @@ const _: () = assert!(SUB == 4, "the span masks below assume 4³ sub-cells");
 /// functions, on a CPU it has checked. On the walk's hot path, code
 /// between them is written without closures: a closure does not take its
 /// caller's features, and the compiler need not inline it (a walk that
-/// grew once left the AVX-512 planes' closure out of line, its operations
-/// calls, and the distance walk ran 3× slower).
+/// grew once left the AVX-512 planes' closure out of line, every operation
+/// in it a call, and the distance walk ran 3× slower).
 ///
 /// # Safety
 /// Calling any method requires the CPU features of its implementation.
