@@ -43,6 +43,8 @@ use std::arch::x86_64::{
 
 use super::super::super::context::Ctx;
 use super::super::super::packet::{Queue, Rays};
+use super::avx2::Avx2;
+use super::wide::Avx512;
 use crate::classify::bezier::SUB;
 use crate::classify::plane::{self, CellTests};
 use crate::filter::coeffs::Coefficient;
@@ -1051,8 +1053,8 @@ unsafe fn refill<S: LaneIsa>(l: &mut Lanes<S>, free: u32, staged: &Staged, pos: 
 /// Lane groups in flight, stepped in turn so one group's arithmetic fills
 /// the other's wait on its gathers. With AVX-512 a group holds 16 vectors
 /// and two take the 32 registers; three and four groups measured slower on
-/// the lobster, and four no faster with AVX2, whose 16 registers two
-/// groups already overflow (BENCHMARKS.md).
+/// the lobster, and four no faster with AVX2 (two groups' 32 vectors
+/// already exceed its 16 registers; BENCHMARKS.md).
 const GROUPS: usize = 2;
 
 /// The walk of every ray of `input` to its next candidate cell (pushed on
@@ -1156,12 +1158,11 @@ unsafe fn finish<S: LaneIsa>(
 }
 
 /// The walk of every ray of `input` to its next candidate cell or out of
-/// its piece over the octree (or DDA) `tree`, in `S`'s lanes, as
-/// [`super::walk_interleaved`] over it does.
-///
-/// # Safety
-/// The CPU has `S`'s features; [`layout_fits`] holds.
-pub(super) unsafe fn walk_octree<S: LaneIsa, T: Coefficient>(
+/// its piece over the octree (or DDA) `tree`, as
+/// [`super::walk_interleaved`] over it does, in the lanes of the best set
+/// this CPU runs ([`super::wide`], else [`super::avx2`]) when the layout
+/// fits; false, with nothing walked, when no lane walk can run.
+pub(super) fn walk_octree<T: Coefficient>(
     ctx: &Ctx<T>,
     tree: (&Octree, u32),
     rays: &mut Rays,
@@ -1169,17 +1170,22 @@ pub(super) unsafe fn walk_octree<S: LaneIsa, T: Coefficient>(
     solve: &mut Queue,
     record: &mut Queue,
     c: &mut Counters,
-) {
+) -> bool {
     let brick_levels = reads_brick_levels(tree.0);
-    // SAFETY: the caller's contract.
-    unsafe { S::octree(ctx, tree, brick_levels, rays, input, solve, record, c) }
+    if super::wide::fits(ctx, tree.0) {
+        // SAFETY: `fits` checked the CPU's features and the layout.
+        unsafe { Avx512::octree(ctx, tree, brick_levels, rays, input, solve, record, c) };
+    } else if super::avx2::fits(ctx, tree.0) {
+        // SAFETY: as above.
+        unsafe { Avx2::octree(ctx, tree, brick_levels, rays, input, solve, record, c) };
+    } else {
+        return false;
+    }
+    true
 }
 
 /// [`walk_octree`] over the distance cubes of `p`.
-///
-/// # Safety
-/// The CPU has `S`'s features; [`distance_layout_fits`] holds.
-pub(super) unsafe fn walk_distance<S: LaneIsa, T: Coefficient>(
+pub(super) fn walk_distance<T: Coefficient>(
     ctx: &Ctx<T>,
     p: &Proximity,
     rays: &mut Rays,
@@ -1187,9 +1193,17 @@ pub(super) unsafe fn walk_distance<S: LaneIsa, T: Coefficient>(
     solve: &mut Queue,
     record: &mut Queue,
     c: &mut Counters,
-) {
-    // SAFETY: the caller's contract.
-    unsafe { S::distance(ctx, p, rays, input, solve, record, c) }
+) -> bool {
+    if super::wide::fits_distance(ctx, p) {
+        // SAFETY: `fits_distance` checked the CPU's features and the maps.
+        unsafe { Avx512::distance(ctx, p, rays, input, solve, record, c) };
+    } else if super::avx2::fits_distance(ctx, p) {
+        // SAFETY: as above.
+        unsafe { Avx2::distance(ctx, p, rays, input, solve, record, c) };
+    } else {
+        return false;
+    }
+    true
 }
 
 /// The body of [`LaneIsa::octree`]: the octree's blocks read from the

@@ -10,8 +10,9 @@
 //!   ([`crate::octree::distance`]), which reach further than aligned blocks.
 //!
 //! With AVX-512 every cell walk runs eight rays at a time ([`wide`]), with
-//! AVX2 four ([`avx2`]), both the one lane walk ([`lanes`]); the scalar walks below are the reference both are
-//! tested against, and the path on other CPUs. All of them step through
+//! AVX2 four ([`avx2`]), both the one lane walk ([`lanes`]); the scalar
+//! walks below are the reference both are tested against, and the path on
+//! other CPUs. All of them step through
 //! the lattice with [`cell`]'s geometry: a ray's exit from a cell, a box or
 //! a block, and its segment's test against a cell's tagged sub-cells.
 
@@ -61,35 +62,7 @@ pub fn traverse<const S: usize, T: Coefficient>(
         Traversal::Dda | Traversal::Octree | Traversal::Distance => match &ctx.skip {
             Skip::Octree { tree, leaf_level } => {
                 #[cfg(target_arch = "x86_64")]
-                if wide::fits(ctx, tree) {
-                    // SAFETY: `fits` checked the CPU's features and the maps.
-                    unsafe {
-                        lanes::walk_octree::<wide::Avx512, _>(
-                            ctx,
-                            (tree, *leaf_level),
-                            rays,
-                            input,
-                            solve,
-                            record,
-                            c,
-                        )
-                    };
-                    return;
-                }
-                #[cfg(target_arch = "x86_64")]
-                if avx2::fits(ctx, tree) {
-                    // SAFETY: `fits` checked the CPU's features and the maps.
-                    unsafe {
-                        lanes::walk_octree::<avx2::Avx2, _>(
-                            ctx,
-                            (tree, *leaf_level),
-                            rays,
-                            input,
-                            solve,
-                            record,
-                            c,
-                        )
-                    };
+                if lanes::walk_octree(ctx, (tree, *leaf_level), rays, input, solve, record, c) {
                     return;
                 }
                 let octree = OctreeBlocks {
@@ -100,22 +73,7 @@ pub fn traverse<const S: usize, T: Coefficient>(
             }
             Skip::Distance(p) => {
                 #[cfg(target_arch = "x86_64")]
-                if wide::fits_distance(ctx, p) {
-                    // SAFETY: `fits_distance` checked the CPU's features and
-                    // the maps.
-                    unsafe {
-                        lanes::walk_distance::<wide::Avx512, _>(
-                            ctx, p, rays, input, solve, record, c,
-                        )
-                    };
-                    return;
-                }
-                #[cfg(target_arch = "x86_64")]
-                if avx2::fits_distance(ctx, p) {
-                    // SAFETY: as above.
-                    unsafe {
-                        lanes::walk_distance::<avx2::Avx2, _>(ctx, p, rays, input, solve, record, c)
-                    };
+                if lanes::walk_distance(ctx, p, rays, input, solve, record, c) {
                     return;
                 }
                 crate::with_isa!(crate::simd::Isa::current(), _L, _M => walk_interleaved(ctx, DistanceCubes::new(p), rays, input, solve, record, c));
