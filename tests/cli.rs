@@ -34,6 +34,17 @@ impl Tmp {
         std::fs::write(&p, bytes).unwrap();
         p
     }
+    /// `snell` with the arguments of `line` (see [`args`]), run in the
+    /// scratch directory, so that the files it names bare are the test's.
+    fn cmd(&self, line: &str) -> Command {
+        let mut c = bin();
+        c.args(args(line)).current_dir(&self.0);
+        c
+    }
+    /// What [`Tmp::cmd`]'s command printed, and how it ended.
+    fn run(&self, line: &str) -> Output {
+        self.cmd(line).output().unwrap()
+    }
 }
 impl Drop for Tmp {
     fn drop(&mut self) {
@@ -41,8 +52,41 @@ impl Drop for Tmp {
     }
 }
 
-fn run(args: &[&str]) -> Output {
-    bin().args(args).output().unwrap()
+/// `snell` with the arguments of `line` (see [`args`]).
+fn run(line: &str) -> Output {
+    bin().args(args(line)).output().unwrap()
+}
+
+/// `line` split at spaces into `snell`'s arguments, in each of which
+/// `{root}` stands for the repository, `{data}` for the shared volumes'
+/// folder, `{sphere}`, `{lobster}`, `{photo}` and `{cranium}` for those
+/// scenes' files, and `{tooth}` and `{headsq}` for the tooth CT and the raw
+/// head CT (split first, so a path with a space stays one argument).
+fn args(line: &str) -> Vec<String> {
+    let path = |p: PathBuf| p.to_str().unwrap().to_string();
+    let vars = [
+        ("{sphere}", path(root().join(SPHERE))),
+        ("{lobster}", path(root().join("scenes/lobster.toml"))),
+        ("{photo}", path(root().join("scenes/sphere-photo.toml"))),
+        ("{cranium}", path(root().join("scenes/cranium.toml"))),
+        ("{tooth}", path(data("tooth.nrrd"))),
+        (
+            "{headsq}",
+            path(data("headsq-quarter-ct_64x64x93_u16le.raw")),
+        ),
+        ("{root}", path(root())),
+        ("{data}", path(root().join("../shared/data"))),
+    ];
+    line.split(' ')
+        .map(|a| vars.iter().fold(a.to_string(), |a, (k, v)| a.replace(k, v)))
+        .collect()
+}
+
+/// Asserts that `o` succeeded, showing its stderr if not, and hands it back.
+#[track_caller]
+fn ok(o: Output) -> Output {
+    assert!(o.status.success(), "{}", stderr(&o));
+    o
 }
 
 fn stderr(o: &Output) -> String {
@@ -70,8 +114,7 @@ fn scene_file(t: &Tmp, name: &str, edit: impl Fn(String) -> String) -> PathBuf {
 
 #[test]
 fn info_json_has_the_promised_keys() {
-    let o = run(&["info", data("cranium-ct.nrrd").to_str().unwrap(), "--json"]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(run("info {data}/cranium-ct.nrrd --json"));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["dims"], serde_json::json!([256, 256, 108]));
     assert_eq!(j["type"], "u16");
@@ -80,7 +123,7 @@ fn info_json_has_the_promised_keys() {
     // The cropped tooth's first suggestion is its surface (the data's
     // README: 120), not the value 99% of its samples lie above, which
     // bounds a few dark pockets (51.8).
-    let o = run(&["info", data("tooth.nrrd").to_str().unwrap(), "--json"]);
+    let o = run("info {tooth} --json");
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let (iso, above) = (&j["suggested_iso"], &j["suggested_above"]);
     assert!((iso[0].as_f64().unwrap() - 120.0).abs() < 5.0, "{iso}");
@@ -88,19 +131,9 @@ fn info_json_has_the_promised_keys() {
         above[0].as_f64().unwrap() < 0.5 && above[2].as_f64().unwrap() > 0.5,
         "{above}"
     );
-    let o = run(&[
-        "info",
-        data("headsq-quarter-ct_64x64x93_u16le.raw")
-            .to_str()
-            .unwrap(),
-        "--dims",
-        "64,64,93",
-        "--type",
-        "u16",
-        "--spacing",
-        "3.2,3.2,1.5",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(run(
+        "info {headsq} --dims 64,64,93 --type u16 --spacing 3.2,3.2,1.5",
+    ));
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(text.contains("iso-values worth trying"), "{text}");
     assert!(
@@ -116,14 +149,14 @@ fn info_json_has_the_promised_keys() {
 #[test]
 fn info_warns_of_data_after_the_samples() {
     let t = Tmp::new("after");
-    let path = t.write(
+    t.write(
         "long.nrrd",
         &nrrd(
             "type: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n",
             &[7; 9],
         ),
     );
-    let o = run(&["info", path.to_str().unwrap(), "--json"]);
+    let o = t.run("info long.nrrd --json");
     assert!(o.status.success(), "{}", stderr(&o));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["dims"], serde_json::json!([2, 2, 2]));
@@ -138,19 +171,13 @@ fn info_warns_of_data_after_the_samples() {
 #[test]
 fn sample_prints_csv_in_input_order() {
     let t = Tmp::new("sample");
-    let pts = t.write("p.txt", b"# grid points\n10,20,30\n\n10.5 20.25 30.75\n");
-    let sample = |points: &Path| {
-        run(&[
-            "sample",
-            data("engine.nrrd").to_str().unwrap(),
-            "--filter",
-            "bspline3",
-            "--points",
-            points.to_str().unwrap(),
-        ])
+    t.write("p.txt", b"# grid points\n10,20,30\n\n10.5 20.25 30.75\n");
+    let sample = |points: &str| {
+        t.run(&format!(
+            "sample {{data}}/engine.nrrd --filter bspline3 --points {points}"
+        ))
     };
-    let o = sample(&pts);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(sample("p.txt"));
     let out = String::from_utf8_lossy(&o.stdout);
     let lines: Vec<&str> = out.lines().collect();
     assert_eq!(lines[0], "x,y,z,value,gx,gy,gz");
@@ -160,9 +187,8 @@ fn sample_prints_csv_in_input_order() {
     assert_eq!(lines[2].split(',').count(), 7);
     assert!(stderr(&o).is_empty(), "{}", stderr(&o));
     // Points off the grid are evaluated (mirror boundary) and counted.
-    let off = t.write("off.txt", b"-1,20,30\n10,20,30\n10,20,1e6\n");
-    let o = sample(&off);
-    assert!(o.status.success(), "{}", stderr(&o));
+    t.write("off.txt", b"-1,20,30\n10,20,30\n10,20,1e6\n");
+    let o = ok(sample("off.txt"));
     assert_eq!(String::from_utf8_lossy(&o.stdout).lines().count(), 4);
     let err = stderr(&o);
     assert!(
@@ -174,51 +200,22 @@ fn sample_prints_csv_in_input_order() {
 #[test]
 fn phantom_writes_loadable_nrrd_and_metaimage() {
     let t = Tmp::new("phantom");
-    let p = t.path("ball.nrrd");
-    let o = run(&[
-        "phantom",
-        "sphere",
-        "--size",
-        "24",
-        "--radius",
-        "6",
-        "--sigma",
-        "1.5",
-        "--format",
-        "u8",
-        "--hole",
-        "11.5,11.5,11.5,2,0.5",
-        "-o",
-        p.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(&["info", p.to_str().unwrap(), "--json"]);
+    ok(t.run(
+        "phantom sphere --size 24 --radius 6 --sigma 1.5 --format u8 \
+         --hole 11.5,11.5,11.5,2,0.5 -o ball.nrrd",
+    ));
+    let o = t.run("info ball.nrrd --json");
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["dims"], serde_json::json!([24, 24, 24]));
     assert_eq!(j["type"], "u8");
     assert_eq!(j["max"], 255.0);
-    let o = run(&[
-        "phantom",
-        "marschner-lobb",
-        "-o",
-        t.path("ml.nrrd").to_str().unwrap(),
-        "--gzip",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    // The same phantom as MetaImage, compressed: the same samples.
+    // The same phantom as NRRD and as MetaImage, compressed: the same
+    // samples.
     let ml = |name: &str| {
-        let p = t.path(name);
-        let o = run(&[
-            "phantom",
-            "marschner-lobb",
-            "-o",
-            p.to_str().unwrap(),
-            "--gzip",
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        snell::volume::load(&p, &Default::default()).unwrap()
+        ok(t.run(&format!("phantom marschner-lobb -o {name} --gzip")));
+        snell::volume::load(&t.path(name), &Default::default()).unwrap()
     };
-    let (nrrd, mha) = (ml("ml2.nrrd"), ml("ml.mha"));
+    let (nrrd, mha) = (ml("ml.nrrd"), ml("ml.mha"));
     assert_eq!(mha.dims(), nrrd.dims());
     assert_eq!(mha.content_hash(), nrrd.content_hash());
 }
@@ -230,27 +227,16 @@ fn phantom_writes_loadable_nrrd_and_metaimage() {
 #[test]
 fn resample_upsamples_a_scan_that_renders() {
     let t = Tmp::new("resample");
-    let up = t.path("cranium-up.nrrd");
-    let o = run(&[
-        "resample",
-        data("cranium-ct.nrrd").to_str().unwrap(),
-        "-o",
-        up.to_str().unwrap(),
-        "--size",
-        "301,301,128",
-        "--filter",
-        "smooth-bspline3",
-        "--lambda",
-        "1",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(t.run(
+        "resample {data}/cranium-ct.nrrd -o up.nrrd --size 301,301,128 \
+         --filter smooth-bspline3 --lambda 1",
+    ));
     assert!(stderr(&o).contains("301x301x128 u16"), "{}", stderr(&o));
-    let info = |p: &Path| -> serde_json::Value {
-        let o = run(&["info", p.to_str().unwrap(), "--json"]);
-        assert!(o.status.success(), "{}", stderr(&o));
+    let info = |p: &str| -> serde_json::Value {
+        let o = ok(t.run(&format!("info {p} --json")));
         serde_json::from_slice(&o.stdout).unwrap()
     };
-    let (a, b) = (info(&data("cranium-ct.nrrd")), info(&up));
+    let (a, b) = (info("{data}/cranium-ct.nrrd"), info("up.nrrd"));
     assert_eq!(b["dims"], serde_json::json!([301, 301, 128]));
     assert_eq!(b["type"], "u16");
     for k in 0..3 {
@@ -260,26 +246,14 @@ fn resample_upsamples_a_scan_that_renders() {
             "axis {k}"
         );
     }
-    let (png, stats) = (t.path("up.png"), t.path("up.json"));
-    let o = run(&[
-        "render",
-        root().join("scenes/cranium.toml").to_str().unwrap(),
-        "--set",
-        &format!("volume.path={}", up.display()),
-        "--set",
-        "surface.filter=bspline3",
-        "--set",
-        "image.width=96",
-        "--set",
-        "image.height=96",
-        "-o",
-        png.to_str().unwrap(),
-        "--stats",
-        stats.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(t.run(&format!(
+        "render {{cranium}} --set volume.path={} --set surface.filter=bspline3 \
+         --set image.width=96 --set image.height=96 -o up.png --stats up.json",
+        t.path("up.nrrd").display()
+    )));
     assert!(stderr(&o).contains("peak memory:"), "{}", stderr(&o));
-    let j: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    let stats = std::fs::read(t.path("up.json")).unwrap();
+    let j: serde_json::Value = serde_json::from_slice(&stats).unwrap();
     assert!(j["peak_rss_mib"].as_f64().unwrap() > 10.0, "{j}");
     assert!(j["counters"]["refractions"].as_u64().unwrap() > 0, "{j}");
 }
@@ -290,27 +264,8 @@ fn resample_upsamples_a_scan_that_renders() {
 #[test]
 fn classify_reports_each_method_against_exact() {
     let t = Tmp::new("classify");
-    let p = t.path("ball.nrrd");
-    let o = run(&[
-        "phantom",
-        "sphere",
-        "--size",
-        "32",
-        "--radius",
-        "10",
-        "--sigma",
-        "1.5",
-        "--format",
-        "u8",
-        "-o",
-        p.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let p = p.to_str().unwrap();
-    let o = run(&[
-        "classify", p, "--filter", "bspline3", "--iso", "127.5", "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(t.run("phantom sphere --size 32 --radius 10 --sigma 1.5 --format u8 -o ball.nrrd"));
+    let o = ok(t.run("classify ball.nrrd --filter bspline3 --iso 127.5 --json"));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(j["lattice"], serde_json::json!([31, 31, 31]));
     let methods = j["methods"].as_array().unwrap();
@@ -334,17 +289,7 @@ fn classify_reports_each_method_against_exact() {
     // The iso-surface (r ≈ 11.8) crosses about 1.5·4π·11.8² ≈ 2600 cells.
     assert!((1000..4000).contains(&exact), "{exact} exact cells");
 
-    let o = run(&[
-        "classify",
-        p,
-        "--filter",
-        "catmull-rom",
-        "--iso",
-        "127.5",
-        "--methods",
-        "bmcc,accc",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(t.run("classify ball.nrrd --filter catmull-rom --iso 127.5 --methods bmcc,accc"));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains("bmcc") && out.contains("accc"), "{out}");
 }
@@ -352,36 +297,16 @@ fn classify_reports_each_method_against_exact() {
 #[test]
 fn render_writes_every_output() {
     let t = Tmp::new("render");
-    let (png, hits, exr, stats) = (
-        t.path("a.png"),
-        t.path("h.exr"),
-        t.path("c.exr"),
-        t.path("s.json"),
-    );
-    let o = run(&[
-        "render",
-        root().join(SPHERE).to_str().unwrap(),
-        "-o",
-        png.to_str().unwrap(),
-        "--hits",
-        hits.to_str().unwrap(),
-        "--exr",
-        exr.to_str().unwrap(),
-        "--stats",
-        stats.to_str().unwrap(),
-        "--threads",
-        "2",
-        "--set",
-        "image.width=64",
-        "--set",
-        "image.height=48",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(t.run(
+        "render {sphere} -o a.png --hits h.exr --exr c.exr --stats s.json --threads 2 \
+         --set image.width=64 --set image.height=48",
+    ));
     assert!(stderr(&o).contains("per ray:"), "stats table on stderr");
-    for p in [&png, &hits, &exr, &stats] {
-        assert!(p.metadata().unwrap().len() > 0, "{}", p.display());
+    for name in ["a.png", "h.exr", "c.exr", "s.json"] {
+        assert!(t.path(name).metadata().unwrap().len() > 0, "{name}");
     }
-    let s: serde_json::Value = serde_json::from_slice(&std::fs::read(&stats).unwrap()).unwrap();
+    let s: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(t.path("s.json")).unwrap()).unwrap();
     assert_eq!(s["counters"]["rays"], 64 * 48);
     assert_eq!(s["counters"]["undefined"], 0);
     for stage in [
@@ -390,28 +315,11 @@ fn render_writes_every_output() {
         assert!(s["stage_cpu_s"][stage].is_number(), "{stage}");
     }
     // The reference and compare commands close the loop.
-    let f32s = root().join("scenes/sphere-f32.toml");
-    let r = t.path("ref.exr");
-    let o = run(&[
-        "reference",
-        f32s.to_str().unwrap(),
-        "--hits",
-        r.to_str().unwrap(),
-        "--set",
-        "image.width=64",
-        "--set",
-        "image.height=48",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(&[
-        "compare",
-        hits.to_str().unwrap(),
-        r.to_str().unwrap(),
-        "--checker",
-        "8",
-        "--json",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(t.run(
+        "reference {root}/scenes/sphere-f32.toml --hits ref.exr \
+         --set image.width=64 --set image.height=48",
+    ));
+    let o = ok(t.run("compare h.exr ref.exr --checker 8 --json"));
     let c: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     assert_eq!(c["pixels"], 64 * 48);
 }
@@ -419,25 +327,12 @@ fn render_writes_every_output() {
 #[test]
 fn iso_outside_the_data_is_a_warning_and_a_backdrop_image() {
     let t = Tmp::new("iso");
-    let png = t.path("b.png");
-    let o = run(&[
-        "render",
-        root().join(SPHERE).to_str().unwrap(),
-        "-o",
-        png.to_str().unwrap(),
-        "--set",
-        "surface.iso=300",
-        "--set",
-        "image.width=32",
-        "--set",
-        "image.height=32",
-        "-q",
-        "--hits",
-        t.path("b.exr").to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(t.run(
+        "render {sphere} -o b.png --set surface.iso=300 \
+         --set image.width=32 --set image.height=32 -q --hits b.exr",
+    ));
     assert!(stderr(&o).contains("warning") && stderr(&o).contains("outside the data range"));
-    assert!(png.exists());
+    assert!(t.path("b.png").exists());
     // Every ray goes straight to the backdrop: no crossing anywhere.
     let h = snell::film::HitImage::read_exr(&t.path("b.exr")).unwrap();
     assert_eq!(h.events.len(), 32 * 32);
@@ -460,29 +355,12 @@ struct Bad {
     env: Option<(&'static str, &'static str)>,
 }
 
-/// `cmd` is split at spaces; `{sphere}`, `{lobster}`, `{photo}`,
-/// `{cranium}`, `{tooth}` and `{headsq}` stand for the paths of those scenes
-/// in scenes/ and of the tooth CT and the raw head CT.
+/// `cmd` is a command line as [`args`] reads it.
 fn bad(kind: &'static str, what: &'static str, cmd: &str, needles: &[&'static str]) -> Bad {
-    let path = |p: PathBuf| p.to_str().unwrap().to_string();
-    let vars = [
-        ("{sphere}", path(root().join(SPHERE))),
-        ("{lobster}", path(root().join("scenes/lobster.toml"))),
-        ("{tooth}", path(data("tooth.nrrd"))),
-        ("{photo}", path(root().join("scenes/sphere-photo.toml"))),
-        ("{cranium}", path(root().join("scenes/cranium.toml"))),
-        (
-            "{headsq}",
-            path(data("headsq-quarter-ct_64x64x93_u16le.raw")),
-        ),
-    ];
     Bad {
         kind,
         what,
-        args: cmd
-            .split(' ')
-            .map(|a| vars.iter().fold(a.to_string(), |a, (k, v)| a.replace(k, v)))
-            .collect(),
+        args: args(cmd),
         needles: needles.to_vec(),
         env: None,
     }
@@ -682,15 +560,9 @@ fn bad_inputs_fail_cleanly_without_output() {
     );
     // Two parts of one frame, for comparisons of different regions.
     for (name, region) in [("k0", "0,0,64,4"), ("k1", "0,4,64,8")] {
-        let o = bin()
-            .args(["render", "ok.toml", "-q", "--region", region, "-o"])
-            .arg(format!("{name}.png"))
-            .arg("--hits")
-            .arg(format!("{name}.exr"))
-            .current_dir(&t.0)
-            .output()
-            .unwrap();
-        assert!(o.status.success(), "{}", stderr(&o));
+        ok(t.run(&format!(
+            "render ok.toml -q --region {region} -o {name}.png --hits {name}.exr"
+        )));
     }
     // A part whose header claims 10^10 pixels in a file of a few hundred
     // bytes: refused from the header, before the reader allocates them.
@@ -985,30 +857,25 @@ fn bad_inputs_fail_cleanly_without_output() {
 fn first_use_messages_warnings_and_help() {
     let t = Tmp::new("first");
     let png = t.path("o.png");
-    let small = ["--set", "image.width=8", "--set", "image.height=8", "-q"];
-    let render = |extra: &[&str]| {
-        let mut args = vec!["render", SPHERE, "-o", png.to_str().unwrap()];
-        args.extend_from_slice(&small);
-        args.extend_from_slice(extra);
-        let o = bin().args(&args).current_dir(root()).output().unwrap();
-        assert!(o.status.success(), "{}", stderr(&o));
+    let small = "--set image.width=8 --set image.height=8";
+    // From the repository, so that the scene is named as a user would.
+    let from_root = |line: &str| {
+        let o = ok(bin().args(args(line)).current_dir(root()).output().unwrap());
         stderr(&o)
     };
-    let plain = render(&[]);
+    let render = |extra: &str| {
+        from_root(&format!(
+            "render {SPHERE} -o {} {small} -q{extra}",
+            png.display()
+        ))
+    };
+    let plain = render("");
     assert!(!plain.contains("warning:"), "{plain}");
-    let mut ignored = Vec::new();
-    for kv in [
-        "camera.height=3",
-        "backdrop.width=3",
-        "render.step=0.5",
-        "render.samples=3",
-        "render.footprint=ewa",
-        "render.seed=3",
-        "surface.lambda=5",
-    ] {
-        ignored.extend(["--set", kv]);
-    }
-    let e = render(&ignored);
+    let e = render(
+        " --set camera.height=3 --set backdrop.width=3 --set render.step=0.5 \
+         --set render.samples=3 --set render.footprint=ewa --set render.seed=3 \
+         --set surface.lambda=5",
+    );
     for key in [
         "camera.height",
         "backdrop.width",
@@ -1025,69 +892,45 @@ fn first_use_messages_warnings_and_help() {
         );
     }
     // Every command that reads a scene says so alike.
-    let hits = t.path("ref.exr");
-    let o = bin()
-        .args(["reference", SPHERE, "--hits", hits.to_str().unwrap()])
-        .args(small.iter().filter(|a| **a != "-q"))
-        .args(["--set", "render.step=0.5"])
-        .current_dir(root())
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
+    let e = from_root(&format!(
+        "reference {SPHERE} --hits {} {small} --set render.step=0.5",
+        t.path("ref.exr").display()
+    ));
     assert!(
-        stderr(&o).contains("warning: scenes/sphere.toml: --set render.step=0.5"),
-        "{}",
-        stderr(&o)
+        e.contains("warning: scenes/sphere.toml: --set render.step=0.5"),
+        "{e}"
     );
     // The same settings used: no warning.
-    let e = render(&[
-        "--set",
-        "render.supersampling=footprint",
-        "--set",
-        "render.footprint=ewa",
-        "--set",
-        "render.traversal=step",
-        "--set",
-        "render.classify=none",
-        "--set",
-        "render.step=0.5",
-    ]);
+    let e = render(
+        " --set render.supersampling=footprint --set render.footprint=ewa \
+         --set render.traversal=step --set render.classify=none --set render.step=0.5",
+    );
     assert!(!e.contains("warning:"), "{e}");
 
     // Text reports: a default f32 phantom's range and the sample CSV.
-    let ph = t.path("p.nrrd");
-    let o = run(&["phantom", "sphere", "-o", ph.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = run(&["info", ph.to_str().unwrap()]);
+    ok(t.run("phantom sphere -o p.nrrd"));
+    let o = t.run("info p.nrrd");
     let out = String::from_utf8_lossy(&o.stdout).into_owned();
     let range = out.lines().find(|l| l.contains("range")).unwrap();
     assert!(range.len() < 60 && range.contains("e-"), "{range}");
-    let pts = t.write("pts.txt", b"3.3,40.7,31.5\n31.5,31.5,31.5\n");
-    let sample = |points: &Path| {
-        let o = run(&[
-            "sample",
-            ph.to_str().unwrap(),
-            "--filter",
-            "bspline3",
-            "--points",
-            points.to_str().unwrap(),
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
-        String::from_utf8_lossy(&o.stdout).into_owned()
+    t.write("pts.txt", b"3.3,40.7,31.5\n31.5,31.5,31.5\n");
+    let sample = |points: &str| {
+        let line = format!("sample p.nrrd --filter bspline3 --points {points}");
+        String::from_utf8_lossy(&ok(t.run(&line)).stdout).into_owned()
     };
-    let csv = sample(&pts);
+    let csv = sample("pts.txt");
     assert!(csv.lines().all(|l| l.len() < 160), "{csv}");
     // Its own output, header and all, reads back as the same points.
-    let again = t.write("again.csv", csv.as_bytes());
-    assert_eq!(sample(&again), csv);
+    t.write("again.csv", csv.as_bytes());
+    assert_eq!(sample("again.csv"), csv);
 
     for size in ["2GiB", "2GB", "1e9", "512mb"] {
-        let o = run(&["info", ph.to_str().unwrap(), "--memory-limit", size]);
+        let o = t.run(&format!("info p.nrrd --memory-limit {size}"));
         assert!(o.status.success(), "{size}: {}", stderr(&o));
     }
     // A limit that rounds to zero bytes would refuse every volume.
     for size in ["0", "0.4", "1e-9"] {
-        let o = run(&["info", ph.to_str().unwrap(), "--memory-limit", size]);
+        let o = t.run(&format!("info p.nrrd --memory-limit {size}"));
         assert!(!o.status.success(), "{size}");
         assert!(
             stderr(&o).contains("under one byte"),
@@ -1096,8 +939,8 @@ fn first_use_messages_warnings_and_help() {
         );
     }
 
-    let help = |args: &[&str]| String::from_utf8_lossy(&run(args).stdout).into_owned();
-    let h = help(&["classify", "--help"]);
+    let help = |line: &str| String::from_utf8_lossy(&run(line).stdout).into_owned();
+    let h = help("classify --help");
     for word in [
         "smooth-bspline3",
         "bezier0",
@@ -1107,23 +950,17 @@ fn first_use_messages_warnings_and_help() {
     ] {
         assert!(h.contains(word), "classify --help lacks {word}: {h}");
     }
-    let h = help(&["phantom", "sphere", "--help"]);
+    let h = help("phantom sphere --help");
     assert!(
         h.contains("Radius of the solid core") && h.contains("grid units"),
         "{h}"
     );
-    let h = help(&["phantom", "marschner-lobb", "--help"]);
+    let h = help("phantom marschner-lobb --help");
     assert!(h.contains("ripple") && h.contains("1 to 4096"), "{h}");
 
     // export-pov's printed command lines use every core, as render does.
     let cores = std::thread::available_parallelism().unwrap().get();
-    let pov = t.path("pov");
-    let o = run(&[
-        "export-pov",
-        root().join(SPHERE).to_str().unwrap(),
-        pov.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(t.run("export-pov {sphere} pov"));
     let out = String::from_utf8_lossy(&o.stdout);
     assert!(out.contains(&format!("Work_Threads={cores}")), "{out}");
     let window = out.lines().find(|l| l.contains("window")).unwrap();
@@ -1131,25 +968,10 @@ fn first_use_messages_warnings_and_help() {
     assert!(wide.split(' ').next().unwrap().len() <= 9, "{window}");
 
     // compare --scene of a photograph backdrop says why there are no squares.
-    let hits = t.path("h.exr");
-    let o = run(&[
-        "render",
-        root().join(SPHERE).to_str().unwrap(),
-        "-o",
-        png.to_str().unwrap(),
-        "--hits",
-        hits.to_str().unwrap(),
-        "--set",
-        "image.width=8",
-        "--set",
-        "image.height=8",
-        "-q",
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let h = hits.to_str().unwrap();
-    let photo = root().join("scenes/sphere-photo.toml");
-    let o = run(&["compare", h, h, "--scene", photo.to_str().unwrap()]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(t.run(&format!(
+        "render {{sphere}} -o o.png --hits h.exr {small} -q"
+    )));
+    let o = ok(t.run("compare h.exr h.exr --scene {photo}"));
     assert!(
         stderr(&o).starts_with("note: ") && stderr(&o).contains("photograph"),
         "{}",
@@ -1165,51 +987,22 @@ fn first_use_messages_warnings_and_help() {
 #[test]
 fn scene_frames_a_volume_that_renders() {
     let t = Tmp::new("scene");
-    let volume = t.path("ball.nrrd");
-    let o = run(&[
-        "phantom",
-        "sphere",
-        "--size",
-        "24",
-        "--radius",
-        "5",
-        "--sigma",
-        "1.5",
-        "--format",
-        "u8",
-        "-o",
-        volume.to_str().unwrap(),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(t.run("phantom sphere --size 24 --radius 5 --sigma 1.5 --format u8 -o ball.nrrd"));
     std::fs::create_dir(t.path("scenes")).unwrap();
-    let headsq = data("headsq-quarter-ct_64x64x93_u16le.raw");
-    for (name, args, expect_view) in [
-        ("ball", vec![volume.to_str().unwrap(), "--view", "-x"], "-x"),
+    for (name, volume, expect_view) in [
+        ("ball", "ball.nrrd --view -x", "-x"),
         (
             "headsq",
-            vec![
-                headsq.to_str().unwrap(),
-                "--dims",
-                "64,64,93",
-                "--type",
-                "u16",
-                "--width",
-                "48",
-                "--height",
-                "32",
-            ],
+            "{headsq} --dims 64,64,93 --type u16 --width 48 --height 32",
             "+y",
         ),
     ] {
-        let scene = t.path(&format!("scenes/{name}.toml"));
-        let mut cmd = vec!["scene"];
-        cmd.extend(&args);
-        cmd.extend(["-o", scene.to_str().unwrap()]);
-        let o = run(&cmd);
+        let scene = format!("scenes/{name}.toml");
+        let o = t.run(&format!("scene {volume} -o {scene}"));
         let e = stderr(&o);
         assert!(o.status.success(), "{e}");
         assert!(e.contains(&format!("looking along {expect_view}")), "{e}");
-        let text = std::fs::read_to_string(&scene).unwrap();
+        let text = std::fs::read_to_string(t.path(&scene)).unwrap();
         if name == "ball" {
             assert!(text.contains("path = \"../ball.nrrd\""), "{text}");
             assert!(
@@ -1222,24 +1015,12 @@ fn scene_frames_a_volume_that_renders() {
                 "{text}"
             );
         }
-        let hits = t.path(&format!("{name}.exr"));
-        let o = run(&[
-            "render",
-            scene.to_str().unwrap(),
-            "-o",
-            t.path(&format!("{name}.png")).to_str().unwrap(),
-            "--hits",
-            hits.to_str().unwrap(),
-            "--set",
-            "image.width=48",
-            "--set",
-            "image.height=32",
-            "-q",
-        ]);
-        let e = stderr(&o);
-        assert!(o.status.success(), "{e}");
-        assert!(!e.contains("warning"), "{e}");
-        let h = snell::film::HitImage::read_exr(&hits).unwrap();
+        let o = ok(t.run(&format!(
+            "render {scene} -o {name}.png --hits {name}.exr \
+             --set image.width=48 --set image.height=32 -q"
+        )));
+        assert!(!stderr(&o).contains("warning"), "{}", stderr(&o));
+        let h = snell::film::HitImage::read_exr(&t.path(&format!("{name}.exr"))).unwrap();
         let (w, ht) = (h.width as usize, h.height as usize);
         let mut inner = 0;
         for y in 0..ht {
@@ -1276,20 +1057,12 @@ fn scene_frames_a_volume_that_renders() {
         std::fs::write(t.path("scenes/linked.toml"), "").unwrap();
         let link = t.path("links/ball.toml");
         std::os::unix::fs::symlink("../scenes/linked.toml", &link).unwrap();
-        let dangling = t.path("links/gone.toml");
-        std::os::unix::fs::symlink("../nowhere/gone.toml", &dangling).unwrap();
-        for l in [&link, &dangling] {
-            let o = run(&["scene", volume.to_str().unwrap(), "-o", l.to_str().unwrap()]);
+        std::os::unix::fs::symlink("../nowhere/gone.toml", t.path("links/gone.toml")).unwrap();
+        for l in ["ball", "gone"] {
+            let o = t.run(&format!("scene ball.nrrd -o links/{l}.toml"));
             assert_fails(&o, &[".toml", "exists", "--force"]);
         }
-        let o = run(&[
-            "scene",
-            volume.to_str().unwrap(),
-            "-o",
-            link.to_str().unwrap(),
-            "--force",
-        ]);
-        assert!(o.status.success(), "{}", stderr(&o));
+        ok(t.run("scene ball.nrrd -o links/ball.toml --force"));
         let text = std::fs::read_to_string(t.path("scenes/linked.toml")).unwrap();
         assert!(text.contains("path = \"../ball.nrrd\""), "{text}");
         assert!(
@@ -1300,21 +1073,14 @@ fn scene_frames_a_volume_that_renders() {
         );
     }
     // A scene file is replaced only when asked.
-    let scene = t.path("scenes/ball.toml");
-    let write = |extra: &[&str]| -> (Output, String) {
-        let mut args = vec![
-            "scene",
-            volume.to_str().unwrap(),
-            "-o",
-            scene.to_str().unwrap(),
-        ];
-        args.extend(extra);
-        let o = run(&args);
-        (o, std::fs::read_to_string(&scene).unwrap())
+    let write = |extra: &str| -> (Output, String) {
+        let o = t.run(&format!("scene ball.nrrd -o scenes/ball.toml {extra}"));
+        let text = std::fs::read_to_string(t.path("scenes/ball.toml")).unwrap();
+        (o, text)
     };
-    let (o, _) = write(&["--iso", "100", "--filter", "bspline3"]);
+    let (o, _) = write("--iso 100 --filter bspline3");
     assert_fails(&o, &["ball.toml", "exists", "--force"]);
-    let (o, text) = write(&["--iso", "100", "--filter", "bspline3", "--force"]);
+    let (o, text) = write("--iso 100 --filter bspline3 --force");
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         text.contains("filter = \"bspline3\"\niso = 100.0"),
@@ -1322,15 +1088,7 @@ fn scene_frames_a_volume_that_renders() {
     );
     // The smoothing spline named takes the default λ as when defaulted, and
     // the values given are written to the last digit.
-    let (o, text) = write(&[
-        "--filter",
-        "smooth-bspline3",
-        "--iso",
-        "100.123456789",
-        "--ior",
-        "1.23456789",
-        "--force",
-    ]);
+    let (o, text) = write("--filter smooth-bspline3 --iso 100.123456789 --ior 1.23456789 --force");
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(
         text.contains("lambda = 1.0\niso = 100.123456789\nior = 1.23456789\n"),
@@ -1345,22 +1103,10 @@ fn thin_volumes_render_with_every_traversal() {
     let t = Tmp::new("thin");
     for size in [1, 2] {
         for traversal in ["step", "dda", "octree", "distance"] {
-            let o = bin()
-                .args([
-                    "render",
-                    root().join(SPHERE).to_str().unwrap(),
-                    "-q",
-                    "-o",
-                    "out.png",
-                ])
-                .args(["--set", "image.width=16", "--set", "image.height=16"])
-                .arg("--set")
-                .arg(format!("volume.phantom.size={size}"))
-                .arg("--set")
-                .arg(format!("render.traversal={traversal}"))
-                .current_dir(&t.0)
-                .output()
-                .unwrap();
+            let o = t.run(&format!(
+                "render {{sphere}} -q -o out.png --set image.width=16 --set image.height=16 \
+                 --set volume.phantom.size={size} --set render.traversal={traversal}"
+            ));
             assert!(
                 o.status.success(),
                 "size {size}, {traversal}: {}",
@@ -1378,8 +1124,8 @@ fn nan_samples_load_with_allow_nan() {
             .to_vec();
     body.extend_from_slice(&1.0f32.to_le_bytes());
     body.extend_from_slice(&f32::NAN.to_le_bytes());
-    let p = t.write("nan.nrrd", &body);
-    let o = run(&["info", p.to_str().unwrap(), "--allow-nan"]);
+    t.write("nan.nrrd", &body);
+    let o = t.run("info nan.nrrd --allow-nan");
     assert!(
         o.status.success() && stderr(&o).contains("warning"),
         "{}",
@@ -1393,68 +1139,58 @@ fn nan_samples_load_with_allow_nan() {
 #[test]
 fn image_over_the_memory_limit_is_refused() {
     let t = Tmp::new("memlimit");
-    let (png, hits) = (t.path("big.png"), t.path("big.exr"));
-    // The sphere at `size`² pixels under an 8 MiB limit, writing `png`
-    // (and `hits`, when given), with `extra` arguments.
-    let render = |png: &Path, hits: Option<&Path>, size: u32, extra: &[&str]| {
-        let mut command = bin();
-        command
+    // The sphere at `size`² pixels under an 8 MiB limit, writing
+    // `name`.png, with `extra` arguments.
+    let render = |name: &str, size: u32, extra: &str| {
+        let line = format!(
+            "render {{sphere}} -q -o {name}.png --set image.width={size} --set image.height={size}{extra}"
+        );
+        t.cmd(&line)
             .env("SNELL_MEMORY_LIMIT", "8M")
-            .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
-            .arg(png)
-            .args(["--set", &format!("image.width={size}")])
-            .args(["--set", &format!("image.height={size}")])
-            .args(extra);
-        if let Some(hits) = hits {
-            command.arg("--hits").arg(hits);
-        }
-        command.output().unwrap()
+            .output()
+            .unwrap()
     };
+    let exists = |name: &str| t.path(name).exists();
     // 1024² pixels at 96 bytes of frame each: 96 MiB, over 8 MiB.
     assert_fails(
-        &render(&png, Some(&hits), 1024, &[]),
+        &render("big", 1024, " --hits big.exr"),
         &["[image]", "1024x1024", "8.0 MiB"],
     );
-    assert!(!png.exists() && !hits.exists());
     assert_eq!(t.0.read_dir().unwrap().count(), 0, "nothing left behind");
     // A part of that frame holds its region (and apron) only: 16² fits,
     // 400² does not, and says it is a part.
-    let o = render(&png, None, 1024, &["--region", "0,0,16,16"]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    std::fs::remove_file(&png).unwrap();
+    ok(render("big", 1024, " --region 0,0,16,16"));
+    std::fs::remove_file(t.path("big.png")).unwrap();
     assert_fails(
-        &render(&png, None, 1024, &["--region", "0,0,400,400"]),
+        &render("big", 1024, " --region 0,0,400,400"),
         &[
             "a 400x400 part (region and apron) of a 1024x1024 image",
             "lower the region",
         ],
     );
-    assert!(!png.exists());
+    assert!(!exists("big.png"));
     // 32² pixels (96 KiB) and the 64³ u8 phantom (4.3 MiB) fit.
-    let (png, hits) = (t.path("small.png"), t.path("small.exr"));
-    let o = render(&png, Some(&hits), 32, &[]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(png.exists() && hits.exists());
+    ok(render("small", 32, " --hits small.exr"));
+    assert!(exists("small.png") && exists("small.exr"));
     // 256² pixels (6.4 MiB) fit alone, and so does the phantom, but not
     // both: the volume gets what the image leaves.
-    let (png, hits) = (t.path("both.png"), t.path("both.exr"));
     assert_fails(
-        &render(&png, Some(&hits), 256, &[]),
+        &render("both", 256, " --hits both.exr"),
         &[
             "64x64x64 volume needs about 4.2 MiB",
             "the memory limit of 8.0 MiB less the 6.4 MiB the 256x256 image takes",
         ],
     );
-    assert!(!png.exists() && !hits.exists());
+    assert!(!exists("both.png") && !exists("both.exr"));
     // The same when a `--set` sized the volume and the error names it.
     assert_fails(
-        &render(&png, None, 256, &["--set", "volume.phantom.size=64"]),
+        &render("both", 256, " --set volume.phantom.size=64"),
         &[
             "--set volume.phantom.size=64: a 64x64x64 volume needs about 4.2 MiB",
             "the memory limit of 8.0 MiB less the 6.4 MiB the 256x256 image takes",
         ],
     );
-    assert!(!png.exists());
+    assert!(!exists("both.png"));
 }
 
 /// Separate processes with 1 and 2 worker threads, and with another tile
@@ -1463,37 +1199,26 @@ fn image_over_the_memory_limit_is_refused() {
 #[test]
 fn hits_are_bitwise_identical_across_threads_and_tiles() {
     let t = Tmp::new("determinism");
-    let cache = t.path("cache");
-    let cache = cache.to_str().unwrap();
     // The cached runs: the first fills the cache, the second renders from
     // coefficients and tags read back from disk; both must match exactly.
-    let runs: [(&str, &[&str]); 5] = [
-        ("t1", &["--threads", "1"]),
-        ("t2", &["--threads", "2"]),
-        ("t2-tile7", &["--threads", "2", "--set", "render.tile=7"]),
-        ("cache-cold", &["--cache", cache]),
-        ("cache-warm", &["--cache", cache]),
+    let runs = [
+        ("t1", "--threads 1"),
+        ("t2", "--threads 2"),
+        ("t2-tile7", "--threads 2 --set render.tile=7"),
+        ("cache-cold", "--cache cache"),
+        ("cache-warm", "--cache cache"),
     ];
     let mut outputs = Vec::new();
     for (name, extra) in runs {
-        let (png, hits) = (
-            t.path(&format!("{name}.png")),
-            t.path(&format!("{name}.exr")),
-        );
-        let o = bin()
-            .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
-            .arg(&png)
-            .arg("--hits")
-            .arg(&hits)
-            .args(["--set", "image.width=90", "--set", "image.height=70"])
-            .args(extra)
-            .output()
-            .unwrap();
+        let o = t.run(&format!(
+            "render {{sphere}} -q -o {name}.png --hits {name}.exr \
+             --set image.width=90 --set image.height=70 {extra}"
+        ));
         assert!(o.status.success(), "{name}: {}", stderr(&o));
         outputs.push((
             name,
-            std::fs::read(&hits).unwrap(),
-            std::fs::read(&png).unwrap(),
+            std::fs::read(t.path(&format!("{name}.exr"))).unwrap(),
+            std::fs::read(t.path(&format!("{name}.png"))).unwrap(),
         ));
     }
     // The image is not trivial: many rays refract through the sphere.
@@ -1530,61 +1255,50 @@ fn inputs_that_are_not_files_are_refused_without_waiting() {
             0,
             "mkfifo {name}"
         );
-        p
     };
-    let mut cases: Vec<Vec<String>> = Vec::new();
-    for name in ["v.nrrd", "v.nii", "v.mha", "v.raw"] {
-        let p = fifo(name).to_str().unwrap().to_string();
-        let mut args = vec!["info".to_string(), p];
-        if name.ends_with(".raw") {
-            args.extend(["--dims", "2,2,2", "--type", "u8"].map(String::from));
-        }
-        cases.push(args);
+    for name in ["v.nrrd", "v.nii", "v.mha", "v.raw", "data.raw"] {
+        fifo(name);
     }
-    fifo("data.raw");
-    let nhdr = t.write(
+    t.write(
         "d.nhdr",
         b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: data.raw\n",
     );
-    let mhd = t.write(
+    t.write(
         "d.mhd",
         b"NDims = 3\nDimSize = 2 2 2\nElementType = MET_UCHAR\nElementDataFile = data.raw\n",
     );
-    for p in [nhdr, mhd] {
-        cases.push(vec!["info".into(), p.to_str().unwrap().into()]);
-    }
-    cases.push(
-        ["info", "/dev/zero", "--dims", "2,2,2", "--type", "u8"]
-            .map(String::from)
-            .to_vec(),
-    );
     // The other inputs: a scene, a backdrop photograph, images and hit
     // EXRs to compare, parts to merge, points to sample.
-    let s = |p: PathBuf| p.to_str().unwrap().to_string();
-    let scene = s(fifo("scene.toml"));
-    let photo = s(fifo("photo.jpg"));
-    let (png, exr) = (s(fifo("a.png")), s(fifo("a.exr")));
-    let points = s(fifo("points.csv"));
-    let out = s(t.path("out.exr"));
-    let sphere = s(root().join("scenes/sphere-photo.toml"));
-    let set_photo = format!("backdrop.image={photo}");
-    let volume = s(t.write(
+    for name in ["scene.toml", "photo.jpg", "a.png", "a.exr", "points.csv"] {
+        fifo(name);
+    }
+    t.write(
         "v2.nrrd",
         b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\n\n\0\0\0\0\0\0\0\0",
-    ));
-    for args in [
-        vec!["render", &scene, "-o", &out],
-        vec!["render", &sphere, "--set", &set_photo, "-o", &out],
-        vec!["compare", &png, &png],
-        vec!["compare", &exr, &exr],
-        vec!["merge", &exr, "-o", &out],
-        vec!["sample", &volume, "--filter", "linear", "--points", &points],
+    );
+    // Where a `--set` path is resolved from is the scene's business: the
+    // photograph is named in full.
+    let photo = format!(
+        "render {{photo}} --set backdrop.image={} -o out.exr",
+        t.path("photo.jpg").display()
+    );
+    for line in [
+        "info v.nrrd",
+        "info v.nii",
+        "info v.mha",
+        "info v.raw --dims 2,2,2 --type u8",
+        "info d.nhdr",
+        "info d.mhd",
+        "info /dev/zero --dims 2,2,2 --type u8",
+        "render scene.toml -o out.exr",
+        &photo,
+        "compare a.png a.png",
+        "compare a.exr a.exr",
+        "merge a.exr -o out.exr",
+        "sample v2.nrrd --filter linear --points points.csv",
     ] {
-        cases.push(args.into_iter().map(String::from).collect());
-    }
-    for args in cases {
-        let mut child = bin()
-            .args(&args)
+        let mut child = t
+            .cmd(line)
             .stdout(std::process::Stdio::piped())
             .stderr(std::process::Stdio::piped())
             .spawn()
@@ -1593,7 +1307,7 @@ fn inputs_that_are_not_files_are_refused_without_waiting() {
         while child.try_wait().unwrap().is_none() {
             if start.elapsed() > std::time::Duration::from_secs(20) {
                 let _ = child.kill();
-                panic!("{args:?} still waiting after 20 s");
+                panic!("{line} still waiting after 20 s");
             }
             std::thread::sleep(std::time::Duration::from_millis(20));
         }
@@ -1611,23 +1325,10 @@ fn inputs_that_are_not_files_are_refused_without_waiting() {
 #[test]
 fn orbit_turns_the_view_about_the_volume() {
     let t = Tmp::new("orbit");
-    let sphere = root().join(SPHERE);
-    let sphere = sphere.to_str().unwrap();
-    let size = ["--set", "image.width=64", "--set", "image.height=48"];
-    let pattern = |name: &str| t.path(name).to_str().unwrap().to_string();
-    let (png, hits, stats) = (
-        pattern("f-%02d.png"),
-        pattern("h-%02d.exr"),
-        pattern("s.json"),
-    );
-    let o = run(&[
-        &[
-            "render", sphere, "-o", &png, "--hits", &hits, "--stats", &stats, "--orbit", "8",
-        ][..],
-        &size[..],
-    ]
-    .concat());
-    assert!(o.status.success(), "{}", stderr(&o));
+    let size = "--set image.width=64 --set image.height=48";
+    let o = ok(t.run(&format!(
+        "render {{sphere}} -o f-%02d.png --hits h-%02d.exr --stats s.json --orbit 8 {size}"
+    )));
     let err = stderr(&o);
     assert!(err.contains("frame 2 at 90°"), "{err}");
     assert!(err.contains("8 frames: median"), "{err}");
@@ -1639,21 +1340,10 @@ fn orbit_turns_the_view_about_the_volume() {
     assert_eq!(s["orbit"]["frames"], 8);
     assert_eq!(s["orbit"]["frame_ms"].as_array().unwrap().len(), 8);
 
+    ok(t.run(&format!(
+        "render {{sphere}} -q -o plain.png --hits plain.exr {size}"
+    )));
     let plain = t.path("plain.exr");
-    let o = run(&[
-        &[
-            "render",
-            sphere,
-            "-q",
-            "-o",
-            &pattern("plain.png"),
-            "--hits",
-            plain.to_str().unwrap(),
-        ][..],
-        &size[..],
-    ]
-    .concat());
-    assert!(o.status.success(), "{}", stderr(&o));
     let read = |p: &Path| snell::film::HitImage::read_exr(p).unwrap();
     let frame = |k: usize| read(&t.path(&format!("h-{k:02}.exr")));
     let f0 = frame(0);
@@ -1691,26 +1381,16 @@ fn orbit_turns_the_view_about_the_volume() {
 #[test]
 fn logs_get_progress_lines_instead_of_a_bar() {
     let t = Tmp::new("progress");
-    let sphere = root().join(SPHERE);
-    let sphere = sphere.to_str().unwrap();
-    let png = t.path("a.png");
     let render = |every: &str, size: &str, quiet: bool| {
-        let mut c = bin();
-        c.env("SNELL_PROGRESS_SECONDS", every).args([
-            "render",
-            sphere,
-            "-o",
-            png.to_str().unwrap(),
-            "--set",
-            &format!("image.width={size}"),
-            "--set",
-            &format!("image.height={size}"),
-        ]);
-        if quiet {
-            c.arg("-q");
-        }
-        let o = c.output().unwrap();
-        assert!(o.status.success(), "{}", stderr(&o));
+        let q = if quiet { " -q" } else { "" };
+        let line = format!(
+            "render {{sphere}} -o a.png --set image.width={size} --set image.height={size}{q}"
+        );
+        let o = ok(t
+            .cmd(&line)
+            .env("SNELL_PROGRESS_SECONDS", every)
+            .output()
+            .unwrap());
         stderr(&o)
     };
     let lines = |err: &str| {
@@ -1753,143 +1433,75 @@ fn logs_get_progress_lines_instead_of_a_bar() {
 #[test]
 fn region_parts_merge_to_the_whole_frame() {
     let t = Tmp::new("region");
-    let sphere = root().join(SPHERE);
-    let sphere = sphere.to_str().unwrap();
-    let bits = |p: &Path| -> Vec<(String, Vec<u32>)> {
-        let part = snell::film::merge::read_part(p).unwrap();
+    let bits = |name: &str| -> Vec<(String, Vec<u32>)> {
+        let part = snell::film::merge::read_part(&t.path(name)).unwrap();
         assert_eq!((part.at.origin, part.at.full), ([0, 0], [96, 80]));
         part.channels
             .into_iter()
             .map(|(n, d)| (n, d.iter().map(|x| x.to_bits()).collect()))
             .collect()
     };
-    let modes: [&[&str]; 4] = [
-        &["render.supersampling=prss"],
-        &[
-            "render.supersampling=prss",
-            "render.prss_fallback=blend-trace",
-        ],
-        &["render.supersampling=footprint", "render.footprint=ewa"],
-        &["render.supersampling=grid", "render.samples=2"],
-    ];
-    for (m, sets) in modes.iter().enumerate() {
-        let render = |name: &str, region: Option<&str>| {
-            let mut cmd = bin();
-            cmd.args(["render", sphere, "-q", "--set", "image.width=96"])
-                .args([
-                    "--set",
-                    "image.height=80",
-                    "--set",
-                    "render.traversal=octree",
-                ])
-                .arg("-o")
-                .arg(t.path(&format!("{name}.png")))
-                .arg("--hits")
-                .arg(t.path(&format!("{name}-hits.exr")))
-                .arg("--exr")
-                .arg(t.path(&format!("{name}-color.exr")));
-            for s in *sets {
-                cmd.args(["--set", s]);
-            }
-            if let Some(r) = region {
-                cmd.args(["--region", r]);
-            }
-            let o = cmd.output().unwrap();
-            assert!(o.status.success(), "{sets:?} {region:?}: {}", stderr(&o));
+    let frame = "render {sphere} -q --set image.width=96 --set image.height=80 \
+                 --set render.traversal=octree";
+    for (m, sets) in [
+        "--set render.supersampling=prss",
+        "--set render.supersampling=prss --set render.prss_fallback=blend-trace",
+        "--set render.supersampling=footprint --set render.footprint=ewa",
+        "--set render.supersampling=grid --set render.samples=2",
+    ]
+    .iter()
+    .enumerate()
+    {
+        let render = |name: &str, region: &str| {
+            let o = t.run(&format!(
+                "{frame} {sets} -o {name}.png --hits {name}-hits.exr --exr {name}-color.exr{region}"
+            ));
+            assert!(o.status.success(), "{sets} {region}: {}", stderr(&o));
         };
         let whole = format!("whole{m}");
-        render(&whole, None);
+        render(&whole, "");
         let regions = ["0,0,37,50", "37,0,96,50", "0,50,96,80"];
         for (k, r) in regions.iter().enumerate() {
-            render(&format!("part{m}-{k}"), Some(r));
+            render(&format!("part{m}-{k}"), &format!(" --region {r}"));
         }
         let part = image::open(t.path(&format!("part{m}-1.png"))).unwrap();
         assert_eq!((part.width(), part.height()), (59, 50));
         for kind in ["hits", "color"] {
-            let merged = t.path(&format!("merged{m}-{kind}.exr"));
-            let mut cmd = bin();
-            cmd.arg("merge");
-            for k in [2, 0, 1] {
-                cmd.arg(t.path(&format!("part{m}-{k}-{kind}.exr")));
-            }
-            cmd.arg("-o").arg(&merged);
-            if kind == "color" {
-                cmd.arg("--png").arg(t.path(&format!("merged{m}.png")));
-            }
-            let o = cmd.output().unwrap();
-            assert!(o.status.success(), "{}", stderr(&o));
-            let want = bits(&t.path(&format!("{whole}-{kind}.exr")));
+            let parts = [2, 0, 1].map(|k| format!("part{m}-{k}-{kind}.exr"));
+            let png = match kind {
+                "color" => format!(" --png merged{m}.png"),
+                _ => String::new(),
+            };
+            let merged = format!("merged{m}-{kind}.exr");
+            ok(t.run(&format!("merge {} -o {merged}{png}", parts.join(" "))));
             assert!(
-                bits(&merged) == want,
-                "{sets:?}: merged {kind} differ from the whole frame"
+                bits(&merged) == bits(&format!("{whole}-{kind}.exr")),
+                "{sets}: merged {kind} differ from the whole frame"
             );
         }
         let png = |n: &str| image::open(t.path(n)).unwrap().to_rgb8().into_raw();
         assert!(png(&format!("merged{m}.png")) == png(&format!("{whole}.png")));
     }
     // A missing part, overlapping parts and hit parts into a PNG are errors.
-    let part = |k: usize| t.path(&format!("part0-{k}-hits.exr"));
-    let out = t.path("bad.exr");
-    let o = bin()
-        .arg("merge")
-        .arg(part(0))
-        .arg(part(1))
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let (p0, p1, p2) = ("part0-0-hits.exr", "part0-1-hits.exr", "part0-2-hits.exr");
+    let o = t.run(&format!("merge {p0} {p1} -o bad.exr"));
     assert_fails(&o, &["2880 of 7680 pixels uncovered", "(0, 50)"]);
-    let o = bin()
-        .args(["merge"])
-        .arg(part(0))
-        .arg(part(0))
-        .arg(part(1))
-        .arg(part(2))
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
+    let o = t.run(&format!("merge {p0} {p0} {p1} {p2} -o bad.exr"));
     assert_fails(&o, &["both cover pixel (0, 0)"]);
-    let o = bin()
-        .arg("merge")
-        .arg(part(0))
-        .arg(part(1))
-        .arg(part(2))
-        .arg("-o")
-        .arg(&out)
-        .arg("--png")
-        .arg(t.path("bad.png"))
-        .output()
-        .unwrap();
+    let o = t.run(&format!("merge {p0} {p1} {p2} -o bad.exr --png bad.png"));
     assert_fails(&o, &["no R, G, B channels"]);
-    assert!(!out.exists() && !t.path("bad.png").exists());
+    assert!(!t.path("bad.exr").exists() && !t.path("bad.png").exists());
     // A part of another frame (another ior) is refused, naming both parts;
     // one rendered with another tile size and thread count, a walk shortcut
     // off and an ignored step is the same frame's.
-    let other = |name: &str, sets: &[&str]| {
-        let mut cmd = bin();
-        cmd.args(["render", sphere, "-q", "--set", "image.width=96"])
-            .args(["--set", "image.height=80", "--region", "0,50,96,80"])
-            .args(["--set", "render.traversal=octree", "--set"])
-            .arg("render.supersampling=prss")
-            .arg("-o")
-            .arg(t.path(&format!("{name}.png")))
-            .arg("--hits")
-            .arg(t.path(&format!("{name}.exr")))
-            .args(sets);
-        assert!(cmd.output().unwrap().status.success());
-        t.path(&format!("{name}.exr"))
+    let other = |name: &str, sets: &str| {
+        ok(t.run(&format!(
+            "{frame} --region 0,50,96,80 --set render.supersampling=prss \
+             -o {name}.png --hits {name}.exr {sets}"
+        )));
     };
-    let glass = other("ior", &["--set", "surface.ior=1.3"]);
-    let o = bin()
-        .arg("merge")
-        .arg(part(0))
-        .arg(part(1))
-        .arg(&glass)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
+    other("ior", "--set surface.ior=1.3");
+    let o = t.run(&format!("merge {p0} {p1} ior.exr -o bad.exr"));
     assert_fails(
         &o,
         &[
@@ -1897,52 +1509,23 @@ fn region_parts_merge_to_the_whole_frame() {
             "ior.exr are parts of different frames",
         ],
     );
-    let retiled = other(
+    other(
         "tiled",
-        &[
-            "--set",
-            "render.tile=8",
-            "--threads",
-            "1",
-            "--set",
-            "render.clear_crossing_cells=false",
-            "--set",
-            "render.step=0.5",
-        ],
+        "--set render.tile=8 --threads 1 --set render.clear_crossing_cells=false \
+         --set render.step=0.5",
     );
-    let o = bin()
-        .arg("merge")
-        .arg(part(0))
-        .arg(part(1))
-        .arg(&retiled)
-        .arg("-o")
-        .arg(&out)
-        .output()
-        .unwrap();
-    assert!(o.status.success(), "{}", stderr(&o));
-    let o = bin()
-        .args(["render", sphere, "-o"])
-        .arg(t.path("r.png"))
-        .args(["--region", "0,0,600,10"])
-        .output()
-        .unwrap();
+    ok(t.run(&format!("merge {p0} {p1} tiled.exr -o bad.exr")));
+    let o = t.run("render {sphere} -o r.png --region 0,0,600,10");
     assert_fails(&o, &["--region", "X1 <= 512"]);
-    let o = bin()
-        .args(["render", sphere, "-o"])
-        .arg(t.path("r.png"))
-        .args(["--region", "5,5,5"])
-        .output()
-        .unwrap();
+    let o = t.run("render {sphere} -o r.png --region 5,5,5");
     assert_fails(&o, &["--region '5,5,5'", "X0,Y0,X1,Y1"]);
 }
 
 /// A `w×h` grey PNG whose value at `(x, y)` is `f(x, y)`.
-fn grey_png(t: &Tmp, name: &str, w: u32, h: u32, f: impl Fn(u32, u32) -> u8) -> PathBuf {
-    let p = t.path(name);
+fn grey_png(t: &Tmp, name: &str, w: u32, h: u32, f: impl Fn(u32, u32) -> u8) {
     image::RgbImage::from_fn(w, h, |x, y| image::Rgb([f(x, y); 3]))
-        .save(&p)
+        .save(t.path(name))
         .unwrap();
-    p
 }
 
 #[test]
@@ -1955,13 +1538,10 @@ fn compare_images_reports_metrics_and_writes_a_diff() {
             40
         }
     };
-    let a = grey_png(&t, "a.png", 32, 24, checker);
+    grey_png(&t, "a.png", 32, 24, checker);
     // Every value 20/255 brighter: RMSE 20/255, PSNR 20·log10(255/20).
-    let b = grey_png(&t, "b.png", 32, 24, |x, y| checker(x, y) + 20);
-    let diff = t.path("diff.png");
-    let s = |p: &Path| p.to_str().unwrap().to_string();
-    let o = run(&["compare", &s(&a), &s(&b), "--json", "--diff", &s(&diff)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    grey_png(&t, "b.png", 32, 24, |x, y| checker(x, y) + 20);
+    let o = ok(t.run("compare a.png b.png --json --diff diff.png"));
     let j: serde_json::Value = serde_json::from_slice(&o.stdout).unwrap();
     let num = |k: &str| j[k].as_f64().unwrap_or_else(|| panic!("{k} in {j}"));
     let d = 20.0 / 255.0;
@@ -1974,7 +1554,7 @@ fn compare_images_reports_metrics_and_writes_a_diff() {
     // Same structure, shifted mean: SSIM just below 1.
     assert!(num("ssim") > 0.9 && num("ssim") < 1.0, "{j}");
     // The heat map: same size, every pixel |diff| = 20/255 → (3·2d, 0, 0).
-    let heat = image::open(&diff).unwrap().to_rgb8();
+    let heat = image::open(t.path("diff.png")).unwrap().to_rgb8();
     assert_eq!(heat.dimensions(), (32, 24));
     let red = (3.0 * 2.0 * d * 255.0f64).round() as u8;
     assert!(
@@ -1984,8 +1564,7 @@ fn compare_images_reports_metrics_and_writes_a_diff() {
     );
 
     // Text output; an image against itself is perfect.
-    let o = run(&["compare", &s(&a), &s(&a)]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    let o = ok(t.run("compare a.png a.png"));
     let text = String::from_utf8_lossy(&o.stdout);
     assert!(
         text.contains("RMSE 0.00000")
@@ -1994,17 +1573,15 @@ fn compare_images_reports_metrics_and_writes_a_diff() {
         "{text}"
     );
     // A local difference shows where it is in the heat map, nowhere else.
-    let c = grey_png(&t, "c.png", 32, 24, |x, y| {
+    grey_png(&t, "c.png", 32, 24, |x, y| {
         if (10..14).contains(&x) && (5..9).contains(&y) {
             255 - checker(x, y)
         } else {
             checker(x, y)
         }
     });
-    let diff2 = t.path("diff2.png");
-    let o = run(&["compare", &s(&c), &s(&a), "--diff", &s(&diff2)]);
-    assert!(o.status.success(), "{}", stderr(&o));
-    let heat = image::open(&diff2).unwrap().to_rgb8();
+    ok(t.run("compare c.png a.png --diff diff2.png"));
+    let heat = image::open(t.path("diff2.png")).unwrap().to_rgb8();
     for (x, y, p) in heat.enumerate_pixels() {
         let inside = (10..14).contains(&x) && (5..9).contains(&y);
         assert_eq!(p.0 == [255, 255, 255], inside, "({x}, {y}): {:?}", p.0);
@@ -2014,11 +1591,10 @@ fn compare_images_reports_metrics_and_writes_a_diff() {
     }
 
     // Different sizes: one error line, exit 2, no diff written.
-    let small = grey_png(&t, "small.png", 16, 24, checker);
-    let diff3 = t.path("diff3.png");
-    let o = run(&["compare", &s(&small), &s(&a), "--diff", &s(&diff3)]);
+    grey_png(&t, "small.png", 16, 24, checker);
+    let o = t.run("compare small.png a.png --diff diff3.png");
     assert_fails(&o, &["small.png", "differ in size"]);
-    assert!(!diff3.exists());
+    assert!(!t.path("diff3.png").exists());
 }
 
 /// Every key a scene file takes stands in README.md's table of keys: each
@@ -2094,21 +1670,12 @@ fn every_scene_key_is_in_the_readme_table() {
 #[test]
 fn an_unwritable_output_is_refused_before_the_work() {
     let t = Tmp::new("unwritable");
-    let png = t.path("o.png");
-    let o = run(&[
-        "render",
-        root().join(SPHERE).to_str().unwrap(),
-        "-o",
-        png.to_str().unwrap(),
-        "--stats",
-        "/proc/snell-stats.json",
-        "--set",
-        "image.width=32",
-        "--set",
-        "image.height=32",
-    ]);
+    let o = t.run(
+        "render {sphere} -o o.png --stats /proc/snell-stats.json \
+         --set image.width=32 --set image.height=32",
+    );
     assert_fails(&o, &["/proc/snell-stats.json: cannot write in /proc"]);
-    assert!(!png.exists(), "no image from a failed command");
+    assert!(!t.path("o.png").exists(), "no image from a failed command");
     assert_eq!(listing(&t.0), Vec::new());
 }
 
@@ -2120,22 +1687,11 @@ fn an_unwritable_output_is_refused_before_the_work() {
 fn an_interrupted_render_leaves_no_debris() {
     for signal in [libc::SIGINT, libc::SIGTERM] {
         let t = Tmp::new(&format!("interrupt-{signal}"));
-        let mut child = bin()
-            .args([
-                "render",
-                root().join(SPHERE).to_str().unwrap(),
-                "-o",
-                t.path("o.png").to_str().unwrap(),
-                "--hits",
-                t.path("h.exr").to_str().unwrap(),
-                "--exr",
-                t.path("c.exr").to_str().unwrap(),
-                "--set",
-                "image.width=2048",
-                "--set",
-                "image.height=2048",
-                "-q",
-            ])
+        let mut child = t
+            .cmd(
+                "render {sphere} -o o.png --hits h.exr --exr c.exr \
+                 --set image.width=2048 --set image.height=2048 -q",
+            )
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
@@ -2167,9 +1723,9 @@ fn an_interrupted_render_leaves_no_debris() {
     let t = Tmp::new("nohup");
     let mut child = Command::new("nohup")
         .arg(env!("CARGO_BIN_EXE_snell"))
-        .args(["render", root().join(SPHERE).to_str().unwrap(), "-q", "-o"])
-        .arg(t.path("o.png"))
-        .args(["--set", "image.width=1024", "--set", "image.height=1024"])
+        .args(args(
+            "render {sphere} -q -o o.png --set image.width=1024 --set image.height=1024",
+        ))
         .current_dir(&t.0)
         .stdout(std::process::Stdio::null())
         .stderr(std::process::Stdio::null())
