@@ -315,10 +315,17 @@ checker = 4.0
 traversal = "distance"
 "#;
 
-/// Scene `name` of `dir` (or [`ML_SCENE`] for `"ml"`) with `small` and
-/// `extra` overrides.
-fn load_case(dir: &std::path::Path, name: &str, small: &[&str], extra: &[&str]) -> Scene {
-    let o: Vec<String> = small.iter().chain(extra).map(|s| s.to_string()).collect();
+/// The image size of the bit-for-bit comparisons below.
+const SMALL: &str = "image.width=96 image.height=96";
+
+/// Scene `name` of `dir` (or [`ML_SCENE`] for `"ml"`) with the overrides
+/// of `small` and `extra`, each a list of `key=value` parted by spaces.
+fn load_case(dir: &std::path::Path, name: &str, small: &str, extra: &str) -> Scene {
+    let o: Vec<String> = small
+        .split_whitespace()
+        .chain(extra.split_whitespace())
+        .map(String::from)
+        .collect();
     if name == "ml" {
         Scene::parse(ML_SCENE, &dir.join("ml.toml"), &o).unwrap()
     } else {
@@ -336,42 +343,33 @@ fn load_case(dir: &std::path::Path, name: &str, small: &[&str], extra: &[&str]) 
 #[test]
 fn passing_over_clear_segments_changes_no_bit() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
-    let small = ["image.width=96", "image.height=96"];
-    let cases: [(&str, &[&str]); 7] = [
-        ("sphere.toml", &["render.traversal=distance"]),
+    let cases = [
+        ("sphere.toml", "render.traversal=distance"),
         (
             "sphere.toml",
-            &["render.traversal=octree", "surface.filter=bspline2"],
+            "render.traversal=octree surface.filter=bspline2",
         ),
         (
             "sphere.toml",
-            &[
-                "render.traversal=dda",
-                "surface.filter=bspline5",
-                "render.classify=accc4",
-            ],
+            "render.traversal=dda surface.filter=bspline5 render.classify=accc4",
         ),
         (
             "sphere.toml",
-            &[
-                "volume.phantom.noise=6",
-                "surface.filter=catmull-rom",
-                "render.traversal=distance",
-            ],
+            "volume.phantom.noise=6 surface.filter=catmull-rom render.traversal=distance",
         ),
         (
             "ball-two-holes.toml",
-            &["render.traversal=octree", "render.coefficients=f32"],
+            "render.traversal=octree render.coefficients=f32",
         ),
         (
             "ball-one-hole.toml",
-            &["render.traversal=distance", "surface.filter=linear"],
+            "render.traversal=distance surface.filter=linear",
         ),
         // Marschner–Lobb's ripples: thin features, planes that fit less well.
-        ("ml", &["render.traversal=octree"]),
+        ("ml", "render.traversal=octree"),
     ];
     for (name, extra) in cases {
-        let scene = load_case(&dir, name, &small, extra);
+        let scene = load_case(&dir, name, SMALL, extra);
         let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
         let (on, off) = with_and_without(&scene, vol, |s| s.render.skip_clear_segments = false);
         assert_same_bits(&on, &off, &format!("{name} {extra:?}"));
@@ -400,46 +398,34 @@ fn passing_over_clear_segments_changes_no_bit() {
 #[test]
 fn clearing_crossing_cells_changes_no_bit() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
-    let small = ["image.width=96", "image.height=96"];
-    let cases: [(&str, &[&str]); 8] = [
-        ("sphere.toml", &["render.traversal=distance"]),
+    let cases = [
+        ("sphere.toml", "render.traversal=distance"),
         (
             "sphere.toml",
-            &["render.traversal=octree", "surface.filter=bspline2"],
+            "render.traversal=octree surface.filter=bspline2",
         ),
         (
             "sphere.toml",
-            &[
-                "render.traversal=dda",
-                "surface.filter=bspline5",
-                "render.classify=accc",
-            ],
+            "render.traversal=dda surface.filter=bspline5 render.classify=accc",
         ),
         (
             "sphere.toml",
-            &[
-                "volume.phantom.noise=6",
-                "surface.filter=smooth-bspline3",
-                "surface.lambda=0",
-                "render.traversal=distance",
-            ],
+            "volume.phantom.noise=6 surface.filter=smooth-bspline3 surface.lambda=0 \
+             render.traversal=distance",
         ),
         (
             "ball-two-holes.toml",
-            &["render.traversal=octree", "render.coefficients=f32"],
+            "render.traversal=octree render.coefficients=f32",
         ),
         (
             "lobster.toml",
-            &["render.traversal=distance", "surface.filter=bspline7"],
+            "render.traversal=distance surface.filter=bspline7",
         ),
-        ("ml", &[]),
-        (
-            "ml",
-            &["surface.filter=bspline2", "render.traversal=octree"],
-        ),
+        ("ml", ""),
+        ("ml", "surface.filter=bspline2 render.traversal=octree"),
     ];
     for (name, extra) in cases {
-        let scene = load_case(&dir, name, &small, extra);
+        let scene = load_case(&dir, name, SMALL, extra);
         let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
         let (on, off) = with_and_without(&scene, vol, |s| s.render.clear_crossing_cells = false);
         assert_same_bits(&on, &off, &format!("{name} {extra:?}"));
@@ -466,42 +452,28 @@ fn clearing_crossing_cells_changes_no_bit() {
 #[test]
 fn skipping_the_empty_approach_changes_no_bit() {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("scenes");
-    let small = ["image.width=96", "image.height=80"];
-    let cases: [(&str, &[&str]); 6] = [
-        ("sphere.toml", &["render.traversal=distance"]),
+    let cases = [
+        ("sphere.toml", "render.traversal=distance"),
         (
             "sphere.toml",
-            &[
-                "render.traversal=octree",
-                "render.supersampling=jitter",
-                "render.samples=3",
-            ],
+            "render.traversal=octree render.supersampling=jitter render.samples=3",
         ),
         (
             "sphere.toml",
-            &[
-                "render.traversal=distance",
-                "camera.kind=\"orthographic\"",
-                "camera.height=70.0",
-            ],
+            "render.traversal=distance camera.kind=\"orthographic\" camera.height=70.0",
         ),
         (
             "sphere.toml",
-            &[
-                "render.traversal=octree",
-                "camera.position=[30.0, 28.0, 6.0]",
-                "camera.fov_y=70.0",
-            ],
+            "render.traversal=octree camera.position=[30.0,28.0,6.0] camera.fov_y=70.0",
         ),
         (
             "ball-two-holes.toml",
-            &["render.traversal=distance", "render.coefficients=f32"],
+            "render.traversal=distance render.coefficients=f32",
         ),
-        ("lobster.toml", &["render.traversal=octree"]),
+        ("lobster.toml", "render.traversal=octree"),
     ];
     for (name, extra) in cases {
-        let o: Vec<String> = small.iter().chain(extra).map(|s| s.to_string()).collect();
-        let scene = Scene::load(&dir.join(name), &o).unwrap();
+        let scene = load_case(&dir, name, "image.width=96 image.height=80", extra);
         let vol = Arc::new(scene.load_volume(&LoadOptions::default()).unwrap());
         let (on, off) = with_and_without(&scene, vol, |s| s.render.skip_empty_approach = false);
         let what = format!("{name} {extra:?}");
