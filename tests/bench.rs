@@ -3,42 +3,11 @@
 //! output with the promised fields, updates a markdown section in place, and
 //! bad input fails with one error line and exit code 2.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+mod common;
 
-fn snell(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_snell"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
-        .output()
-        .unwrap()
-}
+use std::process::Output;
 
-struct Tmp(PathBuf);
-impl Tmp {
-    fn new(tag: &str) -> Tmp {
-        let p = std::env::temp_dir().join(format!("snell-bench-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).unwrap();
-        Tmp(p)
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-}
-impl Drop for Tmp {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{Tmp, ok, stderr};
 
 fn number(v: &serde_json::Value, path: &str) -> f64 {
     let mut cur = v;
@@ -56,20 +25,9 @@ fn smoke_suite_writes_every_output() {
     let md = tmp.path("BENCHMARKS.md");
     let intro = "# Benchmarks\n\nHand-written intro.\n\n<!-- bench:smoke:begin -->\nstale\n<!-- bench:smoke:end -->\n\nHand-written outro.\n";
     std::fs::write(&md, intro).unwrap();
-    let o = snell(&[
-        "bench",
-        "--suite",
-        "smoke",
-        "--out",
-        s(&out),
-        "--repeats",
-        "2",
-        "--threads",
-        "2",
-        "--update",
-        s(&md),
-    ]);
-    assert!(o.status.success(), "stderr: {}", stderr(&o));
+    ok(tmp.run_in_repo(
+        "bench --suite smoke --out {tmp}/out --repeats 2 --threads 2 --update {tmp}/BENCHMARKS.md",
+    ));
 
     for f in [
         "results.json",
@@ -218,61 +176,35 @@ fn assert_fails(o: &Output, needle: &str) {
 fn bad_input_fails_fast_with_one_line() {
     let tmp = Tmp::new("bad");
     let out = tmp.path("out");
+    let bench = |line: &str| tmp.run_in_repo(line);
     assert_fails(
-        &snell(&["bench", "--suite", "nope", "--out", s(&out)]),
+        &bench("bench --suite nope --out {tmp}/out"),
         "unknown suite 'nope'",
     );
     // Output below a regular file cannot be created.
-    let file = tmp.path("file");
-    std::fs::write(&file, "x").unwrap();
-    let under = file.join("out");
+    let file = tmp.write("file", b"x");
     assert_fails(
-        &snell(&["bench", "--suite", "smoke", "--out", s(&under)]),
-        s(&file),
+        &bench("bench --suite smoke --out {tmp}/file/out"),
+        file.to_str().unwrap(),
     );
     assert_fails(
-        &snell(&["bench", "--suite", "smoke", "--out", s(&file)]),
+        &bench("bench --suite smoke --out {tmp}/file"),
         "not a directory",
     );
     assert_fails(
-        &snell(&[
-            "bench",
-            "--suite",
-            "smoke",
-            "--out",
-            s(&out),
-            "--repeats",
-            "0",
-        ]),
+        &bench("bench --suite smoke --out {tmp}/out --repeats 0"),
         "--repeats",
     );
     assert_fails(
-        &snell(&[
-            "bench",
-            "--suite",
-            "smoke",
-            "--out",
-            s(&out),
-            "--threads",
-            "0",
-        ]),
+        &bench("bench --suite smoke --out {tmp}/out --threads 0"),
         "--threads",
     );
     // Without its scene files nothing is made, not even the output folder.
-    let fresh = tmp.path("fresh-out");
     assert_fails(
-        &snell(&[
-            "bench",
-            "--suite",
-            "smoke",
-            "--out",
-            s(&fresh),
-            "--scenes",
-            s(&tmp.0),
-        ]),
+        &bench("bench --suite smoke --out {tmp}/fresh-out --scenes {tmp}"),
         "sphere.toml",
     );
-    assert!(!fresh.exists(), "{} was created", fresh.display());
+    assert!(!tmp.path("fresh-out").exists(), "fresh-out was created");
     // Malformed markers are refused before any rendering.
     let md = tmp.path("B.md");
     std::fs::write(
@@ -281,15 +213,7 @@ fn bad_input_fails_fast_with_one_line() {
     )
     .unwrap();
     assert_fails(
-        &snell(&[
-            "bench",
-            "--suite",
-            "smoke",
-            "--out",
-            s(&out),
-            "--update",
-            s(&md),
-        ]),
+        &bench("bench --suite smoke --out {tmp}/out --update {tmp}/B.md"),
         "B.md",
     );
     assert!(!out.join("results.json").exists(), "nothing was run");
@@ -307,28 +231,15 @@ fn peer_comparison() {
     let md = tmp.path("BENCHMARKS.md");
     let intro = "# B\n\n<!-- bench:peer:begin -->\nstale\n<!-- bench:peer:end -->\n\ntail\n";
     std::fs::write(&md, intro).unwrap();
-    let args = [
-        "bench",
-        "--peer",
-        "povray",
-        "--peer-size",
-        "64",
-        "--repeats",
-        "1",
-        "--out",
-        s(&out),
-        "--update",
-        s(&md),
-    ];
+    let line = "bench --peer povray --peer-size 64 --repeats 1 --out {tmp}/out \
+                --update {tmp}/BENCHMARKS.md";
 
     // No povray on PATH: skipped, not failed.
-    let o = Command::new(env!("CARGO_BIN_EXE_snell"))
-        .args(args)
-        .current_dir(env!("CARGO_MANIFEST_DIR"))
+    let o = ok(tmp
+        .cmd_in_repo(line)
         .env("PATH", "/nonexistent")
         .output()
-        .unwrap();
-    assert!(o.status.success(), "stderr: {}", stderr(&o));
+        .unwrap());
     assert!(
         stderr(&o).contains("skipping the povray comparison")
             && stderr(&o).contains("apt-get install povray"),
@@ -338,7 +249,7 @@ fn peer_comparison() {
     assert!(!out.join("peer.json").exists());
     assert_eq!(std::fs::read_to_string(&md).unwrap(), intro);
     assert_fails(
-        &snell(&["bench", "--peer", "blender", "--out", s(&out)]),
+        &tmp.run_in_repo("bench --peer blender --out {tmp}/out"),
         "unknown peer 'blender'",
     );
 
@@ -346,8 +257,7 @@ fn peer_comparison() {
         eprintln!("skipping the POV-Ray run: povray is not installed (apt-get install povray)");
         return;
     }
-    let o = snell(&args);
-    assert!(o.status.success(), "stderr: {}", stderr(&o));
+    ok(tmp.run_in_repo(line));
     let j: serde_json::Value =
         serde_json::from_slice(&std::fs::read(out.join("peer.json")).unwrap()).unwrap();
     assert_eq!(j["peer"], "povray");
@@ -412,24 +322,10 @@ fn targets_report_every_target() {
     let md = t.path("B.md");
     std::fs::write(&md, "# mine\n\nkept\n").unwrap();
     let out = t.path("out");
-    let o = snell(&[
-        "bench",
-        "--targets",
-        "--targets-size",
-        "24",
-        "--prefilter-size",
-        "24",
-        "--rounds",
-        "2",
-        "--frames",
-        "1",
-        "--targets-skip-peer",
-        "--out",
-        s(&out),
-        "--update",
-        s(&md),
-    ]);
-    assert!(o.status.success(), "{}", stderr(&o));
+    ok(t.run_in_repo(
+        "bench --targets --targets-size 24 --prefilter-size 24 --rounds 2 --frames 1 \
+         --targets-skip-peer --out {tmp}/out --update {tmp}/B.md",
+    ));
     let v: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(out.join("targets.json")).unwrap()).unwrap();
     let rows = v["rows"].as_array().unwrap();
@@ -520,16 +416,9 @@ fn targets_report_every_target() {
     assert!(doc.starts_with("# mine\n\nkept\n"), "{doc}");
     assert!(doc.contains("<!-- bench:targets:begin -->") && doc.contains(section.trim()));
     for bad in ["--rounds", "--frames"] {
-        let o = snell(&["bench", "--targets", bad, "0", "--out", s(&out)]);
+        let o = t.run_in_repo(&format!("bench --targets {bad} 0 --out {{tmp}}/out"));
         assert_fails(&o, "--rounds and --frames must be at least 1");
     }
-    let o = snell(&[
-        "bench",
-        "--targets",
-        "--targets-size",
-        "0",
-        "--out",
-        s(&out),
-    ]);
+    let o = t.run_in_repo("bench --targets --targets-size 0 --out {tmp}/out");
     assert_fails(&o, "--targets-size and --prefilter-size must be at least 1");
 }

@@ -2,96 +2,13 @@
 //! one-line error naming the file and problem, exit code 2, no panic and no
 //! output file.
 
+mod common;
+
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-fn bin() -> Command {
-    Command::new(env!("CARGO_BIN_EXE_snell"))
-}
-
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-fn data(name: &str) -> PathBuf {
-    root().join("../shared/data").join(name)
-}
-
-struct Tmp(PathBuf);
-impl Tmp {
-    fn new(tag: &str) -> Tmp {
-        let p = std::env::temp_dir().join(format!("snell-cli-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).unwrap();
-        Tmp(p)
-    }
-    fn path(&self, name: &str) -> PathBuf {
-        self.0.join(name)
-    }
-    fn write(&self, name: &str, bytes: &[u8]) -> PathBuf {
-        let p = self.path(name);
-        std::fs::write(&p, bytes).unwrap();
-        p
-    }
-    /// `snell` with the arguments of `line` (see [`args`]), run in the
-    /// scratch directory, so that the files it names bare are the test's.
-    fn cmd(&self, line: &str) -> Command {
-        let mut c = bin();
-        c.args(args(line)).current_dir(&self.0);
-        c
-    }
-    /// What [`Tmp::cmd`]'s command printed, and how it ended.
-    fn run(&self, line: &str) -> Output {
-        self.cmd(line).output().unwrap()
-    }
-}
-impl Drop for Tmp {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
-
-/// `snell` with the arguments of `line` (see [`args`]).
-fn run(line: &str) -> Output {
-    bin().args(args(line)).output().unwrap()
-}
-
-/// `line` split at spaces into `snell`'s arguments, in each of which
-/// `{root}` stands for the repository, `{data}` for the shared volumes'
-/// folder, `{sphere}`, `{lobster}`, `{photo}` and `{cranium}` for those
-/// scenes' files, and `{tooth}` and `{headsq}` for the tooth CT and the raw
-/// head CT (split first, so a path with a space stays one argument).
-fn args(line: &str) -> Vec<String> {
-    let path = |p: PathBuf| p.to_str().unwrap().to_string();
-    let vars = [
-        ("{sphere}", path(root().join(SPHERE))),
-        ("{lobster}", path(root().join("scenes/lobster.toml"))),
-        ("{photo}", path(root().join("scenes/sphere-photo.toml"))),
-        ("{cranium}", path(root().join("scenes/cranium.toml"))),
-        ("{tooth}", path(data("tooth.nrrd"))),
-        (
-            "{headsq}",
-            path(data("headsq-quarter-ct_64x64x93_u16le.raw")),
-        ),
-        ("{root}", path(root())),
-        ("{data}", path(root().join("../shared/data"))),
-    ];
-    line.split(' ')
-        .map(|a| vars.iter().fold(a.to_string(), |a, (k, v)| a.replace(k, v)))
-        .collect()
-}
-
-/// Asserts that `o` succeeded, showing its stderr if not, and hands it back.
-#[track_caller]
-fn ok(o: Output) -> Output {
-    assert!(o.status.success(), "{}", stderr(&o));
-    o
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+use common::{SPHERE, Tmp, args, bin, ok, root, run, stderr};
 
 /// Exit 2, one `error:` line containing every `needle`, no panic.
 fn assert_fails(o: &Output, needles: &[&str]) {
@@ -104,8 +21,6 @@ fn assert_fails(o: &Output, needles: &[&str]) {
         assert!(errs[0].contains(n), "'{n}' not in: {}", errs[0]);
     }
 }
-
-const SPHERE: &str = "scenes/sphere.toml";
 
 fn scene_file(t: &Tmp, name: &str, edit: impl Fn(String) -> String) -> PathBuf {
     let text = std::fs::read_to_string(root().join(SPHERE)).unwrap();

@@ -3,7 +3,8 @@
 //! filters, and its renders against the analytic reference and against snell.
 //! Without `povray` the POV-Ray tests print a skip message and pass.
 
-use std::path::PathBuf;
+mod common;
+
 use std::process::Command;
 
 use glam::DVec3;
@@ -16,24 +17,7 @@ use snell::reference::Reference;
 use snell::scene::Scene;
 use snell::volume::{LoadOptions, SampleType, Volume};
 
-fn root() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
-}
-
-struct Tmp(PathBuf);
-impl Tmp {
-    fn new(tag: &str) -> Tmp {
-        let p = std::env::temp_dir().join(format!("snell-peer-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).unwrap();
-        Tmp(p)
-    }
-}
-impl Drop for Tmp {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+use common::{Tmp, root};
 
 fn sphere(set: &[&str]) -> Scene {
     let set: Vec<String> = set.iter().map(|s| s.to_string()).collect();

@@ -3,31 +3,19 @@
 //! inside it, the preparation and film on the frame track, and stage totals
 //! equal to the stats' per-stage profile (the same measurements).
 
+mod common;
+
 use std::collections::{BTreeMap, BTreeSet};
 use std::path::PathBuf;
-use std::process::Command;
 
 use serde_json::Value;
 
-struct Tmp(PathBuf);
-impl Tmp {
-    fn new(tag: &str) -> Tmp {
-        let p = std::env::temp_dir().join(format!("snell-trace-{tag}-{}", std::process::id()));
-        let _ = std::fs::remove_dir_all(&p);
-        std::fs::create_dir_all(&p).unwrap();
-        Tmp(p)
-    }
-}
-impl Drop for Tmp {
-    fn drop(&mut self) {
-        let _ = std::fs::remove_dir_all(&self.0);
-    }
-}
+use common::{Tmp, bin, root};
 
 fn render(dir: &std::path::Path, set: &[&str]) -> (Value, Value) {
     let (trace, stats) = (dir.join("trace.json"), dir.join("stats.json"));
-    let mut cmd = Command::new(env!("CARGO_BIN_EXE_snell"));
-    cmd.current_dir(env!("CARGO_MANIFEST_DIR"))
+    let mut cmd = bin();
+    cmd.current_dir(root())
         .args(["render", "scenes/sphere.toml", "-q", "--threads", "2", "-o"])
         .arg(dir.join("out.png"))
         .arg("--trace")

@@ -1,0 +1,124 @@
+//! What the end-to-end tests share: the repository's and the shared data's
+//! paths, a scratch directory per test, and `snell` run from one command
+//! line. (Each test crate compiles this module and uses part of it.)
+#![allow(dead_code)]
+
+use std::path::PathBuf;
+use std::process::{Command, Output};
+
+/// The repository.
+pub fn root() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A volume of `../shared/data/`.
+pub fn data(name: &str) -> PathBuf {
+    root().join("../shared/data").join(name)
+}
+
+pub const SPHERE: &str = "scenes/sphere.toml";
+
+/// The `snell` binary this test crate was built with.
+pub fn bin() -> Command {
+    Command::new(env!("CARGO_BIN_EXE_snell"))
+}
+
+/// `line` split at spaces into `snell`'s arguments, in each of which
+/// `{root}` stands for the repository, `{data}` for the shared volumes'
+/// folder, `{sphere}`, `{lobster}`, `{photo}` and `{cranium}` for those
+/// scenes' files, and `{tooth}` and `{headsq}` for the tooth CT and the raw
+/// head CT (split first, so a path with a space stays one argument).
+pub fn args(line: &str) -> Vec<String> {
+    let path = |p: PathBuf| p.to_str().unwrap().to_string();
+    let vars = [
+        ("{sphere}", path(root().join(SPHERE))),
+        ("{lobster}", path(root().join("scenes/lobster.toml"))),
+        ("{photo}", path(root().join("scenes/sphere-photo.toml"))),
+        ("{cranium}", path(root().join("scenes/cranium.toml"))),
+        ("{tooth}", path(data("tooth.nrrd"))),
+        (
+            "{headsq}",
+            path(data("headsq-quarter-ct_64x64x93_u16le.raw")),
+        ),
+        ("{root}", path(root())),
+        ("{data}", path(root().join("../shared/data"))),
+    ];
+    line.split(' ')
+        .map(|a| vars.iter().fold(a.to_string(), |a, (k, v)| a.replace(k, v)))
+        .collect()
+}
+
+/// `snell` with the arguments of `line` (see [`args`]), run in the
+/// repository.
+pub fn run(line: &str) -> Output {
+    bin().args(args(line)).current_dir(root()).output().unwrap()
+}
+
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Asserts that `o` succeeded, showing its stderr if not, and hands it back.
+#[track_caller]
+pub fn ok(o: Output) -> Output {
+    assert!(o.status.success(), "{}", stderr(&o));
+    o
+}
+
+/// A scratch directory of its own for one test, removed when dropped.
+pub struct Tmp(pub PathBuf);
+
+impl Tmp {
+    /// `tag` names the test; the process id keeps concurrent runs apart.
+    pub fn new(tag: &str) -> Tmp {
+        let p = std::env::temp_dir().join(format!("snell-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&p);
+        std::fs::create_dir_all(&p).unwrap();
+        Tmp(p)
+    }
+
+    pub fn path(&self, name: &str) -> PathBuf {
+        self.0.join(name)
+    }
+
+    pub fn write(&self, name: &str, bytes: &[u8]) -> PathBuf {
+        let p = self.path(name);
+        std::fs::write(&p, bytes).unwrap();
+        p
+    }
+
+    /// `snell` with the arguments of `line` (see [`args`]), run in the
+    /// scratch directory, so that the files it names bare are the test's.
+    pub fn cmd(&self, line: &str) -> Command {
+        let mut c = bin();
+        c.args(args(line)).current_dir(&self.0);
+        c
+    }
+
+    /// What [`Tmp::cmd`]'s command printed, and how it ended.
+    pub fn run(&self, line: &str) -> Output {
+        self.cmd(line).output().unwrap()
+    }
+
+    /// `snell` with the arguments of `line` (see [`args`]), in which
+    /// `{tmp}` also stands for the scratch directory, run in the repository
+    /// (where commands find `scenes/` by default).
+    pub fn cmd_in_repo(&self, line: &str) -> Command {
+        let dir = self.0.to_str().unwrap();
+        let mut c = bin();
+        c.args(args(line).into_iter().map(|a| a.replace("{tmp}", dir)))
+            .current_dir(root());
+        c
+    }
+
+    /// What [`Tmp::cmd_in_repo`]'s command printed, and how it ended.
+    pub fn run_in_repo(&self, line: &str) -> Output {
+        self.cmd_in_repo(line).output().unwrap()
+    }
+}
+
+impl Drop for Tmp {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
