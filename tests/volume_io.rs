@@ -1182,7 +1182,44 @@ fn nifti_little_big_and_gzip() {
         assert_eq!(vol.spacing(), [0.5, 1.0, 2.0], "{name}");
         assert_eq!(vol.native_type(), SampleType::I16, "{name}");
         assert_eq!(vol.samples(), &want[..], "{name}");
+        assert!(vol.warnings.is_empty(), "{name}: {:?}", vol.warnings);
     }
+    // What follows the image is read past with a warning, as in NRRD and
+    // MetaImage: bytes after it, another gzip member, bytes after the gzip
+    // data that start no member; the samples are the same.
+    let with = |a: &[u8], b: &[u8]| [a, b].concat();
+    for (name, bytes, warning) in [
+        (
+            "tail.nii",
+            with(&le_file, b"0123456789"),
+            "10 bytes after the 8 samples ignored",
+        ),
+        (
+            "members.nii.gz",
+            with(&gzip(&le_file), &gzip(b"more")),
+            "4 more decompressed bytes after the 8 samples ignored",
+        ),
+        (
+            "garbage.nii.gz",
+            with(&gzip(&le_file), b"garbage"),
+            "7 bytes after the gzip data, not gzip, were ignored",
+        ),
+    ] {
+        let path = dir.write(name, &bytes);
+        let vol = load(&path, &opts()).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert_eq!(vol.samples(), &want[..], "{name}");
+        assert_eq!(vol.warnings.len(), 1, "{name}: {:?}", vol.warnings);
+        assert!(
+            vol.warnings[0].contains(warning),
+            "{name}: {:?}",
+            vol.warnings
+        );
+    }
+    // A member cut short is an error, not a warning.
+    let cut = with(&gzip(&le_file), &gzip(b"more")[..12]);
+    let path = dir.write("cut-member.nii.gz", &cut);
+    let e = load(&path, &opts()).unwrap_err().to_string();
+    assert!(e.contains("truncated") || e.contains("gzip"), "{e}");
 }
 
 #[test]

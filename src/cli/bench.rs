@@ -114,8 +114,20 @@ fn run_suite(a: &Args, suite: &Suite) -> anyhow::Result<()> {
     let mut bar = Bar::new();
     let outcome = bench::bench(suite, &opts, &mut bar)?;
     bar.done();
+    // The progress counted classification rows as steps too.
+    let classified: usize = (outcome.report.tables.iter())
+        .map(|t| match &t.body {
+            bench::results::TableResultBody::Classify { rows, .. } => rows.len(),
+            _ => 0,
+        })
+        .sum();
+    let classified = match classified {
+        0 => String::new(),
+        1 => " and 1 classification".into(),
+        n => format!(" and {n} classifications"),
+    };
     eprintln!(
-        "{} configurations in {}; wrote:",
+        "{} configurations{classified} in {}; wrote:",
         outcome.report.configurations.len(),
         bench::report::fmt_duration(outcome.report.run.total_s)
     );

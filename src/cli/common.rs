@@ -282,8 +282,13 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
         _ => Path::new("."),
     };
     if !dir.is_dir() {
+        let what = if dir.exists() {
+            "is not a directory"
+        } else {
+            "does not exist"
+        };
         bail!(
-            "{}: output directory {} does not exist",
+            "{}: output directory {} {what}",
             path.display(),
             dir.display()
         );

@@ -41,9 +41,10 @@ pub struct Args {
     /// Override a scene value, e.g. --set surface.ior=1.33 (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     pub set: Vec<String>,
-    /// Keep prefiltered coefficients and cell tags in DIR, keyed by the
-    /// volume's content hash, and reuse them in later runs (a re-render with
-    /// a new camera, ior or backdrop skips the prefilter and classification).
+    /// Keep prefiltered coefficients, cell tags and sub-cell masks in DIR,
+    /// keyed by the volume's content hash, and reuse them in later runs (a
+    /// re-render with a new camera, ior or backdrop skips the classification
+    /// and reads the coefficients instead of prefiltering).
     /// A missing DIR is created (with a warning), a missing parent refused.
     #[arg(long, value_name = "DIR")]
     pub cache: Option<PathBuf>,
@@ -51,7 +52,7 @@ pub struct Args {
     /// frame split across jobs. The PNG holds the region; the EXRs place it in
     /// the whole image (OpenEXR data window), for `snell merge`. The pixels
     /// are bitwise those of a whole-frame render.
-    #[arg(long, value_name = "X0,Y0,X1,Y1")]
+    #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true)]
     pub region: Option<String>,
     /// Largest working set to allow: bytes (1e9), or K, M, G, T with an
     /// optional B or iB (binary multiples: 1G = 1GB = 1GiB = 2^30 bytes), e.g.

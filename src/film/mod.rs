@@ -54,7 +54,7 @@ pub(crate) fn read_exr_layer(
             .saturating_mul(8);
         if need > limit {
             return Err(format!(
-                "an image of {}x{} pixels with {channels} channels needs about {} of memory to read, over the limit of {} (SNELL_MEMORY_LIMIT raises it)",
+                "an image of {}x{} pixels with {channels} channels needs about {} of memory to read, over the limit of {} (--memory-limit or SNELL_MEMORY_LIMIT raises it)",
                 size.0,
                 size.1,
                 human_bytes(need),

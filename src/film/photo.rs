@@ -44,7 +44,7 @@ pub fn read(path: &Path) -> Result<RgbImage, String> {
     let need = pixels * 32;
     if need > limit {
         return Err(format!(
-            "a {w}x{h} image needs about {} of memory to decode, over the limit of {}; use a smaller image or raise SNELL_MEMORY_LIMIT",
+            "a {w}x{h} image needs about {} of memory to decode, over the limit of {}; use a smaller image or raise the limit (--memory-limit or SNELL_MEMORY_LIMIT)",
             human_bytes(need),
             human_bytes(limit)
         ));

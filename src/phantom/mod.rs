@@ -346,6 +346,12 @@ impl MarschnerLobbSpec {
                 return Err(setting(key, format!("must be finite, got {x}")));
             }
         }
+        if self.alpha == -1.0 {
+            return Err(setting(
+                "alpha",
+                "must not be -1 (the signal is divided by 1 + alpha)".into(),
+            ));
+        }
         check_non_negative("noise", self.noise)
     }
 

@@ -1,22 +1,25 @@
-//! The cache directory's files: prefiltered coefficients and cell tags,
-//! each with a magic, its key's parameters and a closing checksum of its
-//! values, so a damaged or foreign file is refused (and rebuilt), never
-//! trusted.
+//! The cache directory's files: prefiltered coefficients, and cell tags
+//! with the sub-cell masks the classification found, each with a magic, its
+//! key's parameters and a closing checksum of its values, so a damaged or
+//! foreign file is refused (and rebuilt), never trusted.
 
 use std::io::{Read, Write};
 use std::path::Path;
 
 use crate::classify::Tags;
+use crate::classify::masks::LinearMasks;
 use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
 use crate::scene::Storage;
 use crate::volume::WordHash;
 
-// Version 2 ends each file with a checksum of its values (version 1 files
-// are ignored and rewritten).
+// Version 2 ends each file with a checksum of its values; tags files of
+// version 3 hold the sub-cell masks too (older files are ignored and
+// rewritten).
 const FIELD_MAGIC: &[u8; 8] = b"SNLCOEF2";
-const TAGS_MAGIC: &[u8; 8] = b"SNLTAGS2";
+const TAGS_MAGIC: &[u8; 8] = b"SNLTAGS3";
+const OLD_TAGS_MAGIC: &[u8; 8] = b"SNLTAGS2";
 
 /// Reads the checksum that ends a file and compares it with `sum`, the hash
 /// of the file's values: a damaged file of the right length (a flipped bit,
@@ -86,12 +89,21 @@ fn bad(msg: &str) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidData, msg.to_string())
 }
 
+/// Reads a coefficient file through a map and converts its values in one
+/// pass over its bytes: read value by value, or copied into a buffer whose
+/// pages the kernel clears first, the engine's 8.4 M coefficients took
+/// longer to read than to prefilter again.
 pub(super) fn read_field<T: Coefficient>(
     path: &Path,
     filter: FilterKind,
     dims: [usize; 3],
 ) -> std::io::Result<Field<T>> {
-    let mut r = std::io::BufReader::new(crate::input::open(path)?);
+    let file = crate::input::open(path)?;
+    // SAFETY: read-only, and cache files are replaced by rename, never
+    // rewritten in place; only another process truncating the file while it
+    // is read could fault the map, as for the volume readers' maps.
+    let map = unsafe { memmap2::Mmap::map(&file)? };
+    let mut r = &map[..];
     if &read_exact_vec(&mut r, 8)?[..] != FIELD_MAGIC {
         return Err(bad("not a coefficient cache file"));
     }
@@ -111,41 +123,63 @@ pub(super) fn read_field<T: Coefficient>(
     if n != dims.iter().product::<usize>() as u64 {
         return Err(bad("length mismatch"));
     }
-    let mut vals = Vec::with_capacity(n as usize);
-    let mut sum = WordHash::new();
-    let mut b = [0u8; 8];
-    for _ in 0..n {
-        r.read_exact(&mut b)?;
-        let bits = u64::from_le_bytes(b);
-        sum.add(bits);
-        vals.push(f64::from_bits(bits));
+    // The values and the checksum after them, nothing more.
+    if (r.len() as u64) < (n + 1) * 8 {
+        return Err(std::io::ErrorKind::UnexpectedEof.into());
     }
-    check_sum(&mut r, sum)?;
-    if r.read(&mut b)? != 0 {
+    if r.len() as u64 > (n + 1) * 8 {
         return Err(bad("trailing data"));
     }
-    if vals.iter().any(|v| !v.is_finite()) {
+    let (values, rest) = r.split_at(n as usize * 8);
+    let (values, _) = values.as_chunks::<8>();
+    let mut sum = WordHash::new();
+    let mut finite = true;
+    for v in values {
+        let bits = u64::from_le_bytes(*v);
+        sum.add(bits);
+        finite &= f64::from_bits(bits).is_finite();
+    }
+    check_sum(&mut &rest[..], sum)?;
+    if !finite {
         return Err(bad("non-finite coefficient"));
     }
     Ok(Field::from_coeffs(
         filter,
-        Coeffs::from_interior(dims, &vals, |v| T::from_f64(*v)),
+        Coeffs::from_interior(dims, values, |v| T::from_f64(f64::from_le_bytes(*v))),
     ))
 }
 
-pub(super) fn write_tags(w: &mut dyn Write, t: &Tags) -> std::io::Result<()> {
+/// The tags and, where the classification found them, the tagged cells'
+/// sub-cell masks (by linear cell index; an empty list for none).
+pub(super) fn write_tags(
+    w: &mut dyn Write,
+    t: &Tags,
+    masks: &[(usize, u64)],
+) -> std::io::Result<()> {
     w.write_all(TAGS_MAGIC)?;
     write_u64s(w, &t.cells.map(|c| c as u64))?;
     write_u64s(w, &[t.words().len() as u64])?;
     write_u64s(w, t.words())?;
+    write_u64s(w, &[masks.len() as u64])?;
     let mut sum = WordHash::new();
     t.words().iter().for_each(|&x| sum.add(x));
+    for &(cell, mask) in masks {
+        write_u64s(w, &[cell as u64, mask])?;
+        sum.add(cell as u64);
+        sum.add(mask);
+    }
     write_u64s(w, &[sum.value()])
 }
 
-pub(super) fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<Tags> {
+/// What [`write_tags`] wrote, for `lattice`. The masks are checked against
+/// the tags where they are filed ([`crate::classify::SubCellMasks::from_linear`]).
+pub(super) fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<(Tags, LinearMasks)> {
     let mut r = std::io::BufReader::new(crate::input::open(path)?);
-    if &read_exact_vec(&mut r, 8)?[..] != TAGS_MAGIC {
+    let magic = read_exact_vec(&mut r, 8)?;
+    if magic == OLD_TAGS_MAGIC {
+        return Err(bad("written by an earlier snell, without sub-cell masks"));
+    }
+    if magic != TAGS_MAGIC {
         return Err(bad("not a tags cache file"));
     }
     let cells = [read_u64(&mut r)?, read_u64(&mut r)?, read_u64(&mut r)?];
@@ -161,10 +195,23 @@ pub(super) fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<Tags>
         .collect::<std::io::Result<Vec<u64>>>()?;
     let mut sum = WordHash::new();
     words.iter().for_each(|&x| sum.add(x));
+    // At most one mask per cell.
+    let m = read_u64(&mut r)?;
+    if m > lattice.cell_count() as u64 {
+        return Err(bad("more masks than cells"));
+    }
+    let mut masks = Vec::with_capacity(m as usize);
+    for _ in 0..m {
+        let (cell, mask) = (read_u64(&mut r)?, read_u64(&mut r)?);
+        sum.add(cell);
+        sum.add(mask);
+        masks.push((cell as usize, mask));
+    }
     check_sum(&mut r, sum)?;
     let mut b = [0u8; 1];
     if r.read(&mut b)? != 0 {
         return Err(bad("trailing data"));
     }
-    Tags::from_words(lattice.cells, words).ok_or_else(|| bad("bad tag words"))
+    let tags = Tags::from_words(lattice.cells, words).ok_or_else(|| bad("bad tag words"))?;
+    Ok((tags, masks))
 }

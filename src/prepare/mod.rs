@@ -403,15 +403,18 @@ pub fn needs_accel(scene: &Scene) -> Option<Method> {
     }
 }
 
+/// The cell structures of `field` at `iso` for `method`: classified here,
+/// or from `cached` tags and the masks stored with them (none stored: the
+/// masks are built when first asked for).
 fn build_accel(
     field: &AnyField,
     iso: f64,
     method: Method,
-    tags: Option<Tags>,
+    cached: Option<(Tags, classify::masks::LinearMasks)>,
 ) -> (Accel, f64, f64) {
     let start = Instant::now();
-    let (tags, found_masks) = match tags {
-        Some(tags) => (tags, None),
+    let (tags, found_masks) = match cached {
+        Some((tags, masks)) => (tags, (!masks.is_empty()).then_some(masks)),
         None => {
             let iso = field.separating_iso(iso);
             let (c, masks) = with_field!(field, f => {
@@ -607,7 +610,9 @@ impl Cache {
                         let from_disk = cached.is_some();
                         let (a, cs, os) = build_accel(&field, iso, method, cached);
                         if !from_disk && let Some(p) = &disk {
-                            self.write_or_warn(p, |w| write_tags(w, a.octree.tags()));
+                            let found = a.found_masks.lock().unwrap_or_else(|e| e.into_inner());
+                            let masks = found.as_deref().unwrap_or_default();
+                            self.write_or_warn(p, |w| write_tags(w, a.octree.tags(), masks));
                         }
                         times.classify_s = cs;
                         times.octree_s = os;
@@ -683,7 +688,11 @@ impl Cache {
         }
     }
 
-    fn read_tags(&mut self, path: &Path, lattice: &Lattice) -> Option<Tags> {
+    fn read_tags(
+        &mut self,
+        path: &Path,
+        lattice: &Lattice,
+    ) -> Option<(Tags, classify::masks::LinearMasks)> {
         if !path.exists() {
             return None;
         }
@@ -724,7 +733,7 @@ fn check_distance_maps(scene: &Scene, volume: &Volume, limit: u64) -> Result<(),
             what: format!("the distance traversal over a {x}x{y}x{z} volume with its maps"),
             need,
             limit,
-            hint: "; use render.traversal = \"octree\" or raise SNELL_MEMORY_LIMIT".into(),
+            hint: "; use render.traversal = \"octree\" or raise the limit (--memory-limit or SNELL_MEMORY_LIMIT)".into(),
         },
     })
 }
@@ -860,6 +869,22 @@ mod tests {
             first.accel.as_ref().unwrap().octree.tags(),
             second.accel.as_ref().unwrap().octree.tags()
         );
+        // The sub-cell masks the classification found are stored with the
+        // tags, and the masks filed from them are the first render's.
+        let (a1, a2) = (
+            first.accel.as_ref().unwrap(),
+            second.accel.as_ref().unwrap(),
+        );
+        let tags_file = files.iter().find(|f| f.extension().unwrap() == "tags");
+        let lattice = Lattice::new(first.field.kernel(), first.field.dims());
+        let (_, stored) = read_tags(tags_file.unwrap(), &lattice).unwrap();
+        assert_eq!(
+            stored.len(),
+            a1.octree.tags().count(),
+            "a mask per tagged cell"
+        );
+        let masks = |a: &Accel, f: &AnyField| a.masks(f).0.unwrap().parts().1.to_vec();
+        assert_eq!(masks(a1, &first.field), masks(a2, &second.field));
         // Damage every file, cut short or one bit flipped in its values (the
         // length unchanged): the cache warns, rebuilds, and gets the same
         // answer.

@@ -440,7 +440,7 @@ impl Scene {
             }
             .into(),
             msg: format!(
-                "{} at {} per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the {}, render.samples, render.tile or --threads, or raise SNELL_MEMORY_LIMIT (--memory-limit)",
+                "{} at {} per pixel needs about {} of memory (frame {}, tile scratch {} for {} of {}x{}-pixel tiles), over the limit of {}; lower the {}, render.samples, render.tile or --threads, or raise the limit (--memory-limit or SNELL_MEMORY_LIMIT)",
                 match part {
                     None => format!("a {}x{} image", self.width, self.height),
                     Some((w, h)) => format!(
@@ -857,6 +857,40 @@ checker = 8.0
         assert_eq!(file(&s), Path::new("/abs/v.nrrd"));
     }
 
+    /// A `--set` that names one volume source drops the other, whichever
+    /// key of it it names; a raw layout goes with the file it described.
+    #[test]
+    fn a_set_switches_the_volume_source() {
+        let file_scene = |s: &str| {
+            s.replace(
+                "[volume.phantom]\nkind = \"sphere\"\nsize = 32\nformat = \"u8\"",
+                "[volume]\npath = \"v.raw\"\n[volume.raw]\ndims = [2, 2, 2]\ntype = \"u8\"",
+            )
+        };
+        assert!(matches!(
+            parse_text(file_scene, &[]).unwrap().volume,
+            VolumeSource::File { raw: Some(_), .. }
+        ));
+        for set in [
+            "volume.phantom.kind=sphere",
+            "volume.phantom={kind=\"sphere\"}",
+        ] {
+            let s = parse_text(file_scene, &[set]).unwrap();
+            assert!(matches!(s.volume, VolumeSource::Phantom(_)), "{set}");
+        }
+        let s = parse_text(|s| s.to_string(), &["volume.path=v.nrrd"]).unwrap();
+        assert!(matches!(s.volume, VolumeSource::File { raw: None, .. }));
+        // A raw layout for a file whose name gives its format is refused,
+        // as the command line's --dims and --type are.
+        let e = parse_text(file_scene, &["volume.path=v.nrrd"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("[volume.raw]") && e.contains("a NRRD file, whose header gives its layout"),
+            "{e}"
+        );
+    }
+
     fn parse_text(edit: impl Fn(&str) -> String, o: &[&str]) -> Result<Scene, SceneError> {
         let o: Vec<String> = o.iter().map(|s| s.to_string()).collect();
         Scene::parse(&edit(SCENE), Path::new("test.toml"), &o)
@@ -952,6 +986,14 @@ checker = 8.0
             e.starts_with("test.toml: [camera.position] ") && e.contains("1e150"),
             "{e}"
         );
+        let e = parse(&["backdrop.center=[31.5, 31.5, 1e300]"])
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("--set backdrop.center=[31.5, 31.5, 1e300]: ") && e.contains("1e30 "),
+            "{e}"
+        );
+        assert!(parse(&["backdrop.center=[31.5, 31.5, 1e29]"]).is_ok());
         let e = parse(&["camera.kind=orthographic", "camera.height=-1"])
             .unwrap_err()
             .to_string();
@@ -994,7 +1036,7 @@ checker = 8.0
         assert_eq!(
             s.ignored_settings(),
             [
-                "--set render={seed=7} is ignored: render.supersampling is \"none\" (one ray per pixel); set it to grid, jitter, prss or footprint"
+                "--set render={seed=7} is ignored: render.supersampling is \"none\" (one ray per pixel); it is read by jitter"
             ]
         );
         // In the file, named by its key.
@@ -1014,13 +1056,101 @@ checker = 8.0
             "render.step=0.5",
             "render.supersampling=footprint",
             "render.footprint=ewa",
-            "render.samples=3",
+            "render.prss_samples=3",
+            "render.classify=none",
         ])
         .unwrap();
         assert!(
             s.ignored_settings().is_empty(),
             "{:?}",
             s.ignored_settings()
+        );
+    }
+
+    /// Each anti-aliasing setting is reported where the supersampling mode
+    /// (and PRSS's fallback) does not read it, and only there; so are the
+    /// octree's leaf and a classification under step traversal.
+    #[test]
+    fn ignored_settings_follow_what_each_mode_reads() {
+        // The settings reported, in any order.
+        let ignored = |o: &[&str]| -> Vec<String> {
+            let s = parse(o).unwrap();
+            let mut keys: Vec<String> = (s.ignored_settings().iter())
+                .map(|m| m.split(" is ignored").next().unwrap().replace("--set ", ""))
+                .collect();
+            keys.sort();
+            keys
+        };
+        let sorted = |want: &[&str]| {
+            let mut w: Vec<String> = want.iter().map(|s| s.to_string()).collect();
+            w.sort();
+            w
+        };
+        let all = [
+            "render.samples=3",
+            "render.seed=2",
+            "render.prss_samples=4",
+            "render.prss_map=bilinear",
+            "render.prss_curvature=0.5",
+            "render.footprint=ewa",
+        ];
+        fn with<'a>(mode: &[&'a str], all: &[&'a str]) -> Vec<&'a str> {
+            [mode, all].concat()
+        }
+        assert_eq!(
+            ignored(&with(&["render.supersampling=grid"], &all)),
+            sorted(&[
+                "render.seed=2",
+                "render.prss_samples=4",
+                "render.prss_map=bilinear",
+                "render.prss_curvature=0.5",
+                "render.footprint=ewa",
+            ])
+        );
+        assert_eq!(
+            ignored(&with(&["render.supersampling=jitter"], &all)),
+            sorted(&[
+                "render.prss_samples=4",
+                "render.prss_map=bilinear",
+                "render.prss_curvature=0.5",
+                "render.footprint=ewa",
+            ])
+        );
+        // PRSS with its default fallback (blend) re-traces nothing.
+        assert_eq!(
+            ignored(&with(&["render.supersampling=prss"], &all)),
+            sorted(&[
+                "render.footprint=ewa",
+                "render.seed=2",
+                "render.samples=3",
+                "render.prss_curvature=0.5",
+            ])
+        );
+        assert_eq!(
+            ignored(&with(
+                &["render.supersampling=prss", "render.prss_fallback=trace"],
+                &all
+            )),
+            sorted(&["render.footprint=ewa", "render.seed=2"])
+        );
+        assert_eq!(
+            ignored(&with(
+                &[
+                    "render.supersampling=footprint",
+                    "render.prss_fallback=blend-trace"
+                ],
+                &all
+            )),
+            sorted(&["render.seed=2", "render.prss_curvature=0.5"])
+        );
+        assert_eq!(
+            ignored(&["render.traversal=distance", "render.leaf=4"]),
+            sorted(&["render.leaf=4"])
+        );
+        assert!(ignored(&["render.traversal=octree", "render.leaf=4"]).is_empty());
+        assert_eq!(
+            ignored(&["render.traversal=step", "render.classify=bezier"]),
+            sorted(&["render.classify=bezier"])
         );
     }
 }

@@ -51,6 +51,23 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
         }
         v => v,
     };
+    // Switching a volume between file and phantom drops the other source,
+    // whichever key of it the override names (`volume.phantom.kind` as
+    // much as the whole `volume.phantom` table): a scene has one.
+    if let (["volume", source, ..], Some(toml::Value::Table(volume))) =
+        (parts.as_slice(), table.get_mut("volume"))
+    {
+        match *source {
+            "path" => {
+                volume.remove("phantom");
+            }
+            "phantom" => {
+                volume.remove("path");
+                volume.remove("raw");
+            }
+            _ => {}
+        }
+    }
     let mut cur = table;
     for p in &parts[..parts.len() - 1] {
         let entry = cur
@@ -61,14 +78,6 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
             .ok_or_else(|| err(&format!("'{p}' is not a section")))?;
     }
     let last = parts[parts.len() - 1];
-    // Switching a volume between file and phantom: drop the other source.
-    if parts.len() >= 2 && parts[parts.len() - 2] == "volume" {
-        if last == "path" {
-            cur.remove("phantom");
-        } else if last == "phantom" {
-            cur.remove("path");
-        }
-    }
     cur.insert(last.to_string(), parsed);
     Ok(())
 }

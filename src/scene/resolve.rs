@@ -19,6 +19,12 @@ use crate::human::exact;
 use crate::phantom::PhantomSpec;
 use crate::volume::{Endian, RawSpec, SampleType};
 
+/// Largest magnitude of a `backdrop.center` coordinate: rays reach a plane
+/// that far off at backdrop coordinates of about its distance, which the
+/// hit EXR's 32-bit floats (to 3.4e38) still hold at grazing angles of
+/// 1e-8 radians.
+const MAX_BACKDROP_COORD: f64 = 1e30;
+
 /// The whole-number settings' ranges: checked when the scene is resolved,
 /// and named by the message for a value that is no whole number at all
 /// (`image.width = 1.5`), in place of the range of its Rust type.
@@ -138,31 +144,22 @@ pub(super) fn ignored_settings(
                 setting_name(&render.traversal)
             ),
         ));
-    }
-    if render.supersampling == Supersampling::None {
-        for key in [
-            "render.samples",
-            "render.prss_samples",
-            "render.prss_map",
-            "render.prss_fallback",
-            "render.prss_curvature",
-            "render.footprint",
-            "render.seed",
-        ] {
-            unused.push((
-                key,
-                "render.supersampling is \"none\" (one ray per pixel); set it to grid, jitter, prss or footprint".into(),
-            ));
-        }
-    } else if render.supersampling != Supersampling::Footprint {
+    } else if f.render.classify.as_deref().is_some_and(|c| c != "none") {
         unused.push((
-            "render.footprint",
+            "render.classify",
+            "step traversal samples every point and uses no classification".into(),
+        ));
+    }
+    if render.traversal != Traversal::Octree {
+        unused.push((
+            "render.leaf",
             format!(
-                "it is the filter of supersampling = \"footprint\", not of \"{}\"",
-                setting_name(&render.supersampling)
+                "it is the octree's leaf side; the {} traversal has no octree",
+                setting_name(&render.traversal)
             ),
         ));
     }
+    unused.extend(unused_sampling(render));
     if !surface.filter.smooths() {
         unused.push((
             "surface.lambda",
@@ -181,6 +178,46 @@ pub(super) fn ignored_settings(
                 None => format!("[{key}] = {value} is ignored: {why}"),
             })
         })
+        .collect()
+}
+
+/// The anti-aliasing settings the scene's supersampling (and PRSS
+/// fallback) does not read, each with the modes that do.
+fn unused_sampling(render: &RenderSettings) -> Vec<(&'static str, String)> {
+    use super::PrssFallback as F;
+    use Supersampling as S;
+    let mode = render.supersampling;
+    let post = matches!(mode, S::Prss | S::Footprint);
+    let retraces = post && matches!(render.prss_fallback, F::Trace | F::BlendTrace);
+    let keys: [(&str, bool, &str); 7] = [
+        (
+            "render.samples",
+            matches!(mode, S::Grid | S::Jitter) || retraces,
+            "grid and jitter, and prss and footprint where prss_fallback re-traces pixels (trace, blend-trace)",
+        ),
+        ("render.seed", mode == S::Jitter, "jitter"),
+        ("render.prss_samples", post, "prss and footprint"),
+        ("render.prss_map", post, "prss and footprint"),
+        ("render.prss_fallback", post, "prss and footprint"),
+        (
+            "render.prss_curvature",
+            post && render.prss_fallback == F::Trace,
+            "prss and footprint with prss_fallback = \"trace\"",
+        ),
+        ("render.footprint", mode == S::Footprint, "footprint"),
+    ];
+    let now = match mode {
+        S::None => "render.supersampling is \"none\" (one ray per pixel)".to_string(),
+        S::Prss | S::Footprint => format!(
+            "render.supersampling is \"{}\" with prss_fallback = \"{}\"",
+            setting_name(&mode),
+            setting_name(&render.prss_fallback)
+        ),
+        _ => format!("render.supersampling is \"{}\"", setting_name(&mode)),
+    };
+    keys.into_iter()
+        .filter(|&(_, read, _)| !read)
+        .map(|(key, _, readers)| (key, format!("{now}; it is read by {readers}")))
         .collect()
 }
 
@@ -309,9 +346,18 @@ pub(super) fn resolve(
         }
         (None, None) => return Err(bad("volume", "needs path or [volume.phantom]".into())),
         (Some(p), None) => {
-            let raw = match &v.raw {
-                None => None,
-                Some(r) => Some(RawSpec {
+            let raw = match (&v.raw, crate::volume::Format::of(Path::new(p))) {
+                (None, _) => None,
+                (Some(_), Some(format)) => {
+                    return Err(bad(
+                        "volume.raw",
+                        format!(
+                            "applies only to headerless raw volumes (named .raw or without a known extension); {p} is {}, whose header gives its layout",
+                            format.describe()
+                        ),
+                    ));
+                }
+                (Some(r), None) => Some(RawSpec {
                     dims: r.dims,
                     sample_type: SampleType::parse(&r.sample_type).ok_or_else(|| {
                         bad(
@@ -410,6 +456,14 @@ pub(super) fn resolve(
         if !v.is_finite() {
             return Err(bad(key, format!("must be finite, got {raw:?}")));
         }
+    }
+    if let Some(&value) = b.center.iter().find(|c| c.abs() > MAX_BACKDROP_COORD) {
+        return Err(bad(
+            "backdrop.center",
+            format!(
+                "must lie within ±{MAX_BACKDROP_COORD:e} of the origin on each axis (the hits' backdrop coordinates, 32-bit floats in the hit EXR, would overflow), got {value:e}"
+            ),
+        ));
     }
     if normal.length() < 1e-12 {
         return Err(bad("backdrop.normal", "must not be zero".into()));
@@ -535,12 +589,10 @@ pub(super) fn resolve(
             "the octree is built over classified cells: use bmcc, accc, accc2, accc4, accc8 or bezier (bezier0 .. bezier3)".into(),
         ));
     }
-    if r.traversal == Traversal::Step && classify.is_some() {
-        return Err(bad(
-            "render.classify",
-            "step traversal samples every point and uses no classification".into(),
-        ));
-    }
+    // Step traversal samples every point: a classification it was given is
+    // reported as ignored (see `ignored_settings`), as a step is under the
+    // cell traversals.
+    let classify = classify.filter(|_| r.traversal != Traversal::Step);
     if !(r.prss_curvature.is_finite() && r.prss_curvature > 0.0) {
         return Err(bad(
             "render.prss_curvature",

@@ -10,6 +10,7 @@
 //! through [`decode_samples`] and check sizes against [`limits`] *before*
 //! allocating, so an absurd header is an error message, not an OOM kill.
 
+mod gzip;
 pub mod limits;
 pub mod metaimage;
 pub mod nifti;
@@ -135,7 +136,7 @@ pub enum VolumeError {
         source: limits::OverLimit,
     },
     #[error(
-        "{path}: {count} non-finite samples ({nan} NaN, {inf} infinite), first at index {first}; pass --allow-nan to replace them"
+        "{path}: {count} non-finite samples ({nan} NaN, {inf} infinite), first at index {first}; pass --allow-nan (in a scene, --set volume.allow_nan=true) to replace them"
     )]
     NonFinite {
         path: PathBuf,

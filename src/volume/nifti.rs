@@ -7,10 +7,10 @@
 //! compressed without being renamed (and the other way round).
 
 use std::fs::File;
-use std::io::{Seek, SeekFrom};
+use std::io::{BufReader, Seek, SeekFrom};
 use std::path::Path;
 
-use flate2::read::MultiGzDecoder;
+use super::gzip::{DRAIN_LIMIT, GzMembers, drain};
 
 use super::raw::{
     byte_range, data_byte_len, finish_volume, gzip_error, map_file, max_gunzipped_len, read_full,
@@ -91,7 +91,8 @@ fn decode(
 }
 
 /// Uncompressed: decode straight from a map of the file. Bytes after the image
-/// are tolerated (the header is authoritative and says where the image ends).
+/// are tolerated (the header is authoritative and says where the image ends),
+/// with a warning that counts them.
 fn read_plain(path: &Path, file: File, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let map = map_file(path, &file)?;
     let header_bytes = map
@@ -107,14 +108,24 @@ fn read_plain(path: &Path, file: File, opts: &LoadOptions) -> Result<Volume, Vol
         got: (map.len() as u64).saturating_sub(h.vox_offset),
         what: describe(&h),
     })?;
-    decode(path, &h, count, bytes, opts)
+    let mut vol = decode(path, &h, count, bytes, opts)?;
+    let after = map.len() as u64 - end;
+    if after > 0 {
+        let s = if after == 1 { "" } else { "s" };
+        vol.warnings.push(format!(
+            "{}: {after} byte{s} after the {count} samples ignored",
+            path.display()
+        ));
+    }
+    Ok(vol)
 }
 
-/// Gzip: decompress the header, check the sizes it claims, then decompress only
-/// the image into a buffer allocated once.
+/// Gzip: decompress the header, check the sizes it claims, then decompress
+/// the image into a buffer allocated once, and read on to the stream's end
+/// (checking its CRC) to count what follows the image for a warning.
 fn read_gzip(path: &Path, file: File, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let compressed = file.metadata().map_err(|e| VolumeError::io(path, e))?.len();
-    let mut dec = MultiGzDecoder::new(file);
+    let mut dec = GzMembers::new(BufReader::new(file));
     let mut header_bytes = [0u8; HEADER_LEN];
     let got = read_full(&mut dec, &mut header_bytes).map_err(|e| gzip_error(path, e))?;
     if got < HEADER_LEN {
@@ -173,7 +184,29 @@ fn read_gzip(path: &Path, file: File, opts: &LoadOptions) -> Result<Volume, Volu
             what: describe(&h),
         });
     }
-    decode(path, &h, count, &buf, opts)
+    let more = drain(path, &mut dec, |_| false)?;
+    let mut vol = decode(path, &h, count, &buf, opts)?;
+    if more > 0 {
+        let what = match (more, more >= DRAIN_LIMIT) {
+            (1, _) => "1 more decompressed byte".to_string(),
+            (n, false) => format!("{n} more decompressed bytes"),
+            (n, true) => format!("at least {n} more decompressed bytes"),
+        };
+        vol.warnings.push(format!(
+            "{}: {what} after the {count} samples ignored",
+            path.display()
+        ));
+    }
+    let n = dec.trailing;
+    if n > 0 {
+        vol.warnings.push(format!(
+            "{}: {n} byte{} after the gzip data, not gzip, {} ignored",
+            path.display(),
+            if n == 1 { "" } else { "s" },
+            if n == 1 { "was" } else { "were" },
+        ));
+    }
+    Ok(vol)
 }
 
 /// Fixed-offset field access in the header's byte order.

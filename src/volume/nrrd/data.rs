@@ -1,9 +1,10 @@
 //! Locating and decompressing the data: the raw, ascii and gzip regions of
 //! the samples after the header and the skips, and what follows them.
 
-use std::io::{self, BufRead, Read};
+use std::io::{self, BufRead};
 use std::path::Path;
 
+use super::super::gzip::{GzMembers, drain};
 use super::super::raw::{
     byte_range, data_byte_len, gzip_error, max_gunzipped_len, read_full, skip_bytes, zeroed_buffer,
 };
@@ -268,29 +269,15 @@ pub(super) fn gzip_region<R: BufRead>(
     }
     // Reading on to the stream's end checks its CRC; for `byte skip: -1`
     // the samples are the last `need` bytes seen, kept in `buf` as a ring.
-    let mut more = 0u64;
     let mut ring = 0usize;
-    let mut chunk = vec![0u8; 64 << 10];
-    loop {
-        let n = match dec.read(&mut chunk) {
-            Ok(0) => break,
-            Ok(n) => n.min(chunk.len()),
-            Err(e) if e.kind() == io::ErrorKind::Interrupted => continue,
-            Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => {
-                return Err(VolumeError::format(
-                    path,
-                    "gzip data ends before its trailer: the file is truncated",
-                ));
-            }
-            Err(e) => return Err(gzip_error(path, e)),
-        };
-        more += n as u64;
+    let mut more = drain(path, &mut dec, |chunk| {
         if layout.byte_skip == ByteSkip::DataAtEnd {
-            ring = ring_write(&mut buf, ring, &chunk[..n]);
-        } else if more >= DRAIN_LIMIT {
-            break;
+            ring = ring_write(&mut buf, ring, chunk);
+            true
+        } else {
+            false
         }
-    }
+    })?;
     if layout.byte_skip == ByteSkip::DataAtEnd {
         buf.rotate_left(ring);
         more = 0;
@@ -303,11 +290,6 @@ pub(super) fn gzip_region<R: BufRead>(
         },
     ))
 }
-
-/// Decompressed bytes after the samples counted at most, so that a gzip
-/// bomb behind a small volume costs a bounded time: the warning then says
-/// "at least".
-pub(super) const DRAIN_LIMIT: u64 = 256 << 20;
 
 /// Writes `data` into the ring `buf` at `at`; returns the next position.
 /// `buf` then holds the last `buf.len()` bytes ever written, oldest at the
@@ -326,62 +308,6 @@ pub(super) fn ring_write(buf: &mut [u8], at: usize, data: &[u8]) -> usize {
     let rest = data.len() - first;
     buf[..rest].copy_from_slice(&data[first..]);
     (at + data.len()) % len
-}
-
-/// A gzip stream of one or more members, read as one, that stops — as teem's
-/// reader, which never looks past the samples, would not fail — at bytes
-/// after a whole member that do not start another (gzip's magic `1f 8b`),
-/// counting them in `trailing`. A member that is corrupt or cut short is an
-/// error as ever.
-struct GzMembers<R: BufRead> {
-    dec: Option<flate2::bufread::GzDecoder<R>>,
-    trailing: u64,
-}
-
-impl<R: BufRead> GzMembers<R> {
-    fn new(src: R) -> GzMembers<R> {
-        GzMembers {
-            dec: Some(flate2::bufread::GzDecoder::new(src)),
-            trailing: 0,
-        }
-    }
-}
-
-impl<R: BufRead> Read for GzMembers<R> {
-    fn read(&mut self, out: &mut [u8]) -> io::Result<usize> {
-        loop {
-            let Some(dec) = &mut self.dec else {
-                return Ok(0);
-            };
-            let n = dec.read(out)?;
-            if n > 0 || out.is_empty() {
-                return Ok(n);
-            }
-            // The member ended, its CRC checked: another, or the end.
-            let Some(mut src) = self.dec.take().map(|d| d.into_inner()) else {
-                return Ok(0);
-            };
-            let head = src.fill_buf()?;
-            if head.is_empty() {
-                return Ok(0);
-            }
-            if head[0] == 0x1f && head.get(1).is_none_or(|&b| b == 0x8b) {
-                self.dec = Some(flate2::bufread::GzDecoder::new(src));
-                continue;
-            }
-            let mut rest = 0u64;
-            loop {
-                let n = src.fill_buf()?.len();
-                if n == 0 {
-                    break;
-                }
-                src.consume(n);
-                rest += n as u64;
-            }
-            self.trailing = rest;
-            return Ok(0);
-        }
-    }
 }
 
 /// The error of a `line skip` longer than the data it skips in.

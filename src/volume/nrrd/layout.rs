@@ -27,6 +27,9 @@ pub(super) struct Layout {
     /// The detached data's files in order (none: attached data); more than
     /// one split the data in equal slabs along the slowest axes.
     pub(super) data_files: Vec<PathBuf>,
+    /// What the header says that the volume does not keep, for
+    /// [`Volume::warnings`](super::super::Volume::warnings).
+    pub(super) warnings: Vec<String>,
 }
 
 impl Layout {
@@ -93,6 +96,15 @@ impl Layout {
         };
 
         let spacing = spacing_from(path, f, dimension, &axes)?;
+        let warnings = shear(f, &axes)
+            .map(|(a, b, degrees)| {
+                format!(
+                    "{}: the space directions of axes {a} and {b} are {degrees:.2}° apart, not 90° (a sheared grid, as of a gantry-tilted CT); the volume is rendered on a rectangular grid with each axis' sample distance, so its shape is not the scan's",
+                    path.display()
+                )
+            })
+            .into_iter()
+            .collect();
 
         let byte_skip = match f.byte_skip.unwrap_or(0) {
             // The end of the file (raw) or of the decompressed data (gzip).
@@ -115,8 +127,32 @@ impl Layout {
             line_skip: f.line_skip.unwrap_or(0),
             byte_skip,
             data_files,
+            warnings,
         })
     }
+}
+
+/// The first pair of the grid's axes (`axes`) whose space directions are
+/// further than 0.01° from perpendicular, with their angle in degrees.
+/// Rotated grids pass (their orientation is dropped, their shape kept);
+/// sheared ones do not keep their shape.
+fn shear(f: &Fields, axes: &[usize]) -> Option<(usize, usize, f64)> {
+    let dirs = f.space_directions.as_ref()?;
+    let dir = |a: usize| dirs.get(a).and_then(|d| d.as_deref());
+    for (i, &a) in axes.iter().enumerate() {
+        for &b in &axes[i + 1..] {
+            let (Some(u), Some(v)) = (dir(a), dir(b)) else {
+                continue;
+            };
+            let (lu, lv) = (vector_length(u)?, vector_length(v)?);
+            let cos = u.iter().zip(v).map(|(x, y)| x * y).sum::<f64>() / (lu * lv);
+            let degrees = cos.clamp(-1.0, 1.0).acos().to_degrees();
+            if (degrees - 90.0).abs() > 0.01 {
+                return Some((a, b, degrees));
+            }
+        }
+    }
+    None
 }
 
 pub(super) fn join<T: std::fmt::Display>(values: &[T]) -> String {

@@ -41,7 +41,8 @@ mod data;
 mod header;
 mod layout;
 
-use data::{DRAIN_LIMIT, ascii_region, gzip_region, raw_region};
+use super::gzip::DRAIN_LIMIT;
+use data::{ascii_region, gzip_region, raw_region};
 use header::parse_header;
 use layout::Layout;
 
@@ -168,7 +169,8 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             (decode(&all)?, warnings)
         }
     };
-    vol.warnings.extend(warnings);
+    vol.warnings
+        .extend(layout.warnings.iter().cloned().chain(warnings));
     Ok(vol)
 }
 
@@ -567,6 +569,19 @@ mod tests {
         ))
         .unwrap();
         assert_eq!(l.spacing, [5.0, 2.0, 5.0]);
+        assert!(l.warnings.is_empty(), "{:?}", l.warnings);
+        // Sheared axes (a gantry tilt of 20°): kept as lengths, with a
+        // warning naming the axes and their angle.
+        let l = layout(&format!(
+            "{base}dimension: 3\nsizes: 2 2 2\nspace directions: (1,0,0) (0,1,0) (0,0.3420201433256687,0.9396926207859084)\n\n"
+        ))
+        .unwrap();
+        assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
+        assert!(
+            l.warnings[0].contains("axes 1 and 2 are 70.00° apart"),
+            "{:?}",
+            l.warnings
+        );
         let l = layout(&format!(
             "{base}dimension: 2\nsizes: 2 2\nspacings: 0.25 nan\n\n"
         ))
