@@ -1219,7 +1219,10 @@ fn nifti_little_big_and_gzip() {
     let cut = with(&gzip(&le_file), &gzip(b"more")[..12]);
     let path = dir.write("cut-member.nii.gz", &cut);
     let e = load(&path, &opts()).unwrap_err().to_string();
-    assert!(e.contains("truncated") || e.contains("gzip"), "{e}");
+    assert!(
+        e.contains("cut-member.nii.gz: gzip data ends before its trailer"),
+        "{e}"
+    );
 }
 
 #[test]

@@ -30,11 +30,27 @@ pub struct VolumeArgs {
     /// Replace NaN/infinite samples in float data instead of rejecting the file.
     #[arg(long)]
     pub allow_nan: bool,
+    #[command(flatten)]
+    pub limit: MemoryLimit,
+}
+
+/// `--memory-limit`, which every command that reads or builds large data
+/// takes, so that a refusal's advice to raise it holds whatever command
+/// printed it.
+#[derive(Args, Debug, Clone, Default)]
+pub struct MemoryLimit {
     /// Largest working set to allow: bytes (1e9), or K, M, G, T with an
     /// optional B or iB (binary multiples: 1G = 1GB = 1GiB = 2^30 bytes);
     /// default: SNELL_MEMORY_LIMIT, else 80% of available memory.
     #[arg(long, value_name = "BYTES", allow_hyphen_values = true)]
     pub memory_limit: Option<String>,
+}
+
+impl MemoryLimit {
+    /// Sets the limit for every check in this process ([`set_memory_limit`]).
+    pub fn apply(&self) -> anyhow::Result<()> {
+        set_memory_limit(self.memory_limit.as_deref())
+    }
 }
 
 /// `--offset`: a whole number of bytes.
@@ -93,7 +109,7 @@ impl VolumeArgs {
     /// The options for reading `path`. The raw layout options are refused
     /// for a file whose name says its format (its header gives its layout).
     pub fn load_options(&self, path: &Path) -> anyhow::Result<LoadOptions> {
-        let memory_limit = memory_limit(self.memory_limit.as_deref())?;
+        let memory_limit = memory_limit(self.limit.memory_limit.as_deref())?;
         if let Some(format) = volume::Format::of(path) {
             let given: Vec<&str> = [
                 ("--dims", self.dims.is_some()),

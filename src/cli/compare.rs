@@ -10,7 +10,7 @@ use snell::film::HitImage;
 use snell::film::metrics::{RgbImage, compare_images, diff_image};
 use snell::scene::Scene;
 
-use super::common::{check_distinct, check_format, check_output};
+use super::common::{MemoryLimit, check_distinct, check_format, check_output};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -34,6 +34,8 @@ pub struct Args {
     /// Print JSON instead of text.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub limit: MemoryLimit,
 }
 
 /// A hit-position EXR's hits and place in its frame; `None` for a colour
@@ -47,6 +49,7 @@ fn read_hits(p: &Path) -> anyhow::Result<Option<(HitImage, [i32; 2])>> {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    a.limit.apply()?;
     if let Some(d) = &a.diff {
         check_output(d)?;
         check_format(d, "--diff", &["png"])?;

@@ -11,7 +11,7 @@ use snell::peer::povray::{self, PovOptions, Variant};
 use snell::peer::{Interpolation, PeerError};
 use snell::volume::LoadOptions;
 
-use super::common::{check_distinct, check_output, load_scene};
+use super::common::{MemoryLimit, check_distinct, check_output, load_scene};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -44,9 +44,12 @@ pub struct Args {
     /// With --run: print the result as JSON.
     #[arg(long)]
     pub json: bool,
+    #[command(flatten)]
+    pub limit: MemoryLimit,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    a.limit.apply()?;
     let scene = load_scene(&a.scene, &a.set)?;
     let threads = a
         .threads

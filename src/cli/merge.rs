@@ -8,7 +8,7 @@ use clap::Args as ClapArgs;
 use snell::film::merge::{self, Part};
 use snell::volume::limits::default_memory_limit;
 
-use super::common::{check_distinct, check_format, check_output, given};
+use super::common::{MemoryLimit, check_distinct, check_format, check_output, given};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -22,9 +22,12 @@ pub struct Args {
     /// Also write an 8-bit PNG (colour parts only).
     #[arg(long, value_name = "OUT.png")]
     pub png: Option<PathBuf>,
+    #[command(flatten)]
+    pub limit: MemoryLimit,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    a.limit.apply()?;
     check_output(&a.output)?;
     check_format(&a.output, "-o", &["exr"])?;
     if let Some(p) = &a.png {

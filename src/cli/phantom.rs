@@ -10,7 +10,7 @@ use snell::phantom::{
 };
 use snell::volume::{self, Volume};
 
-use super::common::{check_format, check_output, set_memory_limit, triple};
+use super::common::{MemoryLimit, check_format, check_output, triple};
 use super::progress::{self, Step};
 
 #[derive(ClapArgs, Debug)]
@@ -45,11 +45,8 @@ pub struct Output {
     /// Compress the samples: gzip in NRRD, zlib in MetaImage.
     #[arg(long)]
     pub gzip: bool,
-    /// Largest working set to allow: bytes (1e9), or K, M, G, T with an
-    /// optional B or iB (binary multiples: 1G = 1GB = 1GiB = 2^30 bytes);
-    /// default: SNELL_MEMORY_LIMIT, else 80% of available memory.
-    #[arg(long, value_name = "BYTES", allow_hyphen_values = true)]
-    pub memory_limit: Option<String>,
+    #[command(flatten)]
+    pub limit: MemoryLimit,
 }
 
 #[derive(ClapArgs, Debug)]
@@ -173,7 +170,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             };
             check_output(&s.out.output)?;
             check_format(&s.out.output, "-o", &volume::WRITTEN_FORMATS)?;
-            set_memory_limit(s.out.memory_limit.as_deref())?;
+            s.out.limit.apply()?;
             (build(|| spec.build())?, s.out)
         }
         Kind::MarschnerLobb(m) => {
@@ -187,7 +184,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             };
             check_output(&m.out.output)?;
             check_format(&m.out.output, "-o", &volume::WRITTEN_FORMATS)?;
-            set_memory_limit(m.out.memory_limit.as_deref())?;
+            m.out.limit.apply()?;
             (build(|| spec.build())?, m.out)
         }
     };

@@ -6,7 +6,7 @@ use clap::Args as ClapArgs;
 
 use snell::reference::Reference;
 
-use super::common::{check_distinct, check_format, check_output, given, load_scene};
+use super::common::{MemoryLimit, check_distinct, check_format, check_output, given, load_scene};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -21,9 +21,12 @@ pub struct Args {
     /// Override a scene value (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     pub set: Vec<String>,
+    #[command(flatten)]
+    pub limit: MemoryLimit,
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
+    a.limit.apply()?;
     let scene = load_scene(&a.scene, &a.set)?;
     check_output(&a.hits)?;
     check_format(&a.hits, "--hits", &["exr"])?;

@@ -12,7 +12,9 @@ use snell::render::{self, Prepared};
 use snell::scene::{Orbit, Scene};
 use snell::volume::LoadOptions;
 
-use super::common::{check_distinct, check_format, check_output, load_scene, load_scene_part};
+use super::common::{
+    MemoryLimit, check_distinct, check_format, check_output, load_scene, load_scene_part,
+};
 use super::progress::{self, Count, Step};
 
 #[derive(ClapArgs, Debug)]
@@ -54,12 +56,8 @@ pub struct Args {
     /// are bitwise those of a whole-frame render.
     #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true)]
     pub region: Option<String>,
-    /// Largest working set to allow: bytes (1e9), or K, M, G, T with an
-    /// optional B or iB (binary multiples: 1G = 1GB = 1GiB = 2^30 bytes), e.g.
-    /// 8G or 1.5GiB (default: the SNELL_MEMORY_LIMIT variable, else 80% of
-    /// available memory).
-    #[arg(long, value_name = "BYTES", allow_hyphen_values = true)]
-    pub memory_limit: Option<String>,
+    #[command(flatten)]
+    pub limit: MemoryLimit,
     /// Render a turntable of N frames: the camera and the backdrop go round
     /// the volume's centre about the image's vertical axis, 360°/N a frame,
     /// as if the volume turned on a turntable; the preparation is made once.
@@ -75,7 +73,7 @@ pub struct Args {
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
-    super::common::set_memory_limit(a.memory_limit.as_deref())?;
+    a.limit.apply()?;
     // A part's frame may pass the memory limit as a whole: its own is
     // checked below, once its window is known.
     let scene = if a.region.is_some() {

@@ -140,7 +140,7 @@ fn parse_points(reader: impl BufRead, name: &str, limit: u64) -> anyhow::Result<
 pub fn run(a: Args) -> anyhow::Result<()> {
     let kind = super::common::filter_kind(&a.filter, a.lambda)?;
     let name = a.points.display().to_string();
-    let limit = super::common::memory_limit(a.vol.memory_limit.as_deref())?;
+    let limit = super::common::memory_limit(a.vol.limit.memory_limit.as_deref())?;
     let points = if name == "-" {
         parse_points(std::io::stdin().lock(), "stdin", limit)?
     } else {

@@ -181,6 +181,31 @@ impl<T: Coefficient> Coeffs<T> {
         grid
     }
 
+    /// Builds a padded grid whose interior rows (x fastest, then y, then
+    /// z) `row` fills in order, for a sequential source such as a cache
+    /// file read without a copy of the whole; stops at `row`'s first error.
+    pub fn from_rows<E>(
+        dims: [usize; 3],
+        mut row: impl FnMut(&mut [T]) -> Result<(), E>,
+    ) -> Result<Coeffs<T>, E> {
+        let padded = dims.map(|n| n + 2 * APRON);
+        let mut grid = Coeffs {
+            dims,
+            padded,
+            data: vec![T::default(); padded[0] * padded[1] * padded[2]],
+        };
+        crate::heap::advise_huge_pages(&mut grid.data);
+        let [nx, ny, nz] = dims;
+        for z in 0..nz {
+            for y in 0..ny {
+                let at = grid.interior_offset(0, y, z);
+                row(&mut grid.data[at..at + nx])?;
+            }
+        }
+        grid.fill_apron();
+        Ok(grid)
+    }
+
     /// Dims of the interior (the volume's dims).
     pub fn dims(&self) -> [usize; 3] {
         self.dims

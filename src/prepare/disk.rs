@@ -89,21 +89,18 @@ fn bad(msg: &str) -> std::io::Error {
     std::io::Error::new(std::io::ErrorKind::InvalidData, msg.to_string())
 }
 
-/// Reads a coefficient file through a map and converts its values in one
-/// pass over its bytes: read value by value, or copied into a buffer whose
-/// pages the kernel clears first, the engine's 8.4 M coefficients took
-/// longer to read than to prefilter again.
+/// Reads a coefficient file straight into the padded grid, a row at a
+/// time through one small buffer: read value by value, or copied whole into
+/// a buffer whose pages the kernel clears first, the engine's 8.4 M
+/// coefficients took longer to read than to prefilter again. (Not mapped:
+/// on a shared file system another task's replacement of the file could
+/// fault a map, where a read only fails.)
 pub(super) fn read_field<T: Coefficient>(
     path: &Path,
     filter: FilterKind,
     dims: [usize; 3],
 ) -> std::io::Result<Field<T>> {
-    let file = crate::input::open(path)?;
-    // SAFETY: read-only, and cache files are replaced by rename, never
-    // rewritten in place; only another process truncating the file while it
-    // is read could fault the map, as for the volume readers' maps.
-    let map = unsafe { memmap2::Mmap::map(&file)? };
-    let mut r = &map[..];
+    let mut r = std::io::BufReader::with_capacity(1 << 20, crate::input::open(path)?);
     if &read_exact_vec(&mut r, 8)?[..] != FIELD_MAGIC {
         return Err(bad("not a coefficient cache file"));
     }
@@ -123,30 +120,29 @@ pub(super) fn read_field<T: Coefficient>(
     if n != dims.iter().product::<usize>() as u64 {
         return Err(bad("length mismatch"));
     }
-    // The values and the checksum after them, nothing more.
-    if (r.len() as u64) < (n + 1) * 8 {
-        return Err(std::io::ErrorKind::UnexpectedEof.into());
-    }
-    if r.len() as u64 > (n + 1) * 8 {
-        return Err(bad("trailing data"));
-    }
-    let (values, rest) = r.split_at(n as usize * 8);
-    let (values, _) = values.as_chunks::<8>();
     let mut sum = WordHash::new();
     let mut finite = true;
-    for v in values {
-        let bits = u64::from_le_bytes(*v);
-        sum.add(bits);
-        finite &= f64::from_bits(bits).is_finite();
+    let mut bytes = vec![0u8; dims[0] * 8];
+    let coeffs = Coeffs::from_rows(dims, |row: &mut [T]| {
+        r.read_exact(&mut bytes)?;
+        let (values, _) = bytes.as_chunks::<8>();
+        for (dst, v) in row.iter_mut().zip(values) {
+            let bits = u64::from_le_bytes(*v);
+            sum.add(bits);
+            let value = f64::from_bits(bits);
+            finite &= value.is_finite();
+            *dst = T::from_f64(value);
+        }
+        Ok::<(), std::io::Error>(())
+    })?;
+    check_sum(&mut r, sum)?;
+    if r.read(&mut [0u8; 1])? != 0 {
+        return Err(bad("trailing data"));
     }
-    check_sum(&mut &rest[..], sum)?;
     if !finite {
         return Err(bad("non-finite coefficient"));
     }
-    Ok(Field::from_coeffs(
-        filter,
-        Coeffs::from_interior(dims, values, |v| T::from_f64(f64::from_le_bytes(*v))),
-    ))
+    Ok(Field::from_coeffs(filter, coeffs))
 }
 
 /// The tags and, where the classification found them, the tagged cells'
@@ -195,10 +191,11 @@ pub(super) fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<(Tags
         .collect::<std::io::Result<Vec<u64>>>()?;
     let mut sum = WordHash::new();
     words.iter().for_each(|&x| sum.add(x));
-    // At most one mask per cell.
+    // None, or one per tagged cell.
     let m = read_u64(&mut r)?;
-    if m > lattice.cell_count() as u64 {
-        return Err(bad("more masks than cells"));
+    let tagged: u64 = words.iter().map(|w| u64::from(w.count_ones())).sum();
+    if m != 0 && m != tagged {
+        return Err(bad("mask count differs from the tagged cells'"));
     }
     let mut masks = Vec::with_capacity(m as usize);
     for _ in 0..m {

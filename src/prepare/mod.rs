@@ -56,8 +56,9 @@ pub struct Accel {
     proximity: OnceLock<Proximity>,
     tagged: OnceLock<Arc<TaggedIndex>>,
     masks: OnceLock<Option<SubCellMasks>>,
-    /// The masks the classification found along with the tags (by linear
-    /// cell index), until [`Accel::masks`] files them by slot.
+    /// The masks the classification found along with the tags, or the disk
+    /// cache stored with them (by linear cell index), until [`Accel::masks`]
+    /// files them by slot.
     found_masks: Mutex<Option<classify::masks::LinearMasks>>,
     curvature: OnceLock<Option<CurvatureBounds>>,
     planes: OnceLock<Option<PlaneBounds>>,
@@ -119,8 +120,8 @@ impl Accel {
     /// methods that have them ([`Method::has_masks`]: the Bézier hull, and
     /// ACCC per 2³, 4³ or 8³ sub-cells; the paper's BMCC and ACCC are measured at
     /// their own resolution) when they fit [`TABLE_BUDGET`]: filed from those
-    /// the classification found, or computed when the tags came from the
-    /// disk cache; returns them (or `None`) and the build time.
+    /// the classification found (or the disk cache kept), else computed;
+    /// returns them (or `None`) and the build time.
     pub fn masks(&self, field: &AnyField) -> (Option<&SubCellMasks>, f64) {
         let (m, s) = timed_once(&self.masks, || {
             // Taken whatever happens, so an unused find is not kept.

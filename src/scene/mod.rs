@@ -476,9 +476,10 @@ impl Scene {
     /// the volume's samples and spacing; not the scene's or the volume's
     /// file names (each machine of a split render may read them from its own
     /// path), nor what leaves the pixels as they are: the tile size, the
-    /// walk's shortcuts, `step` with a cell traversal, and every
-    /// anti-aliasing setting without anti-aliasing. The parts of one frame (`render --region`) carry it, and
-    /// `snell merge` refuses parts whose fingerprints differ.
+    /// walk's shortcuts, and the settings the frame does not read (those
+    /// its warnings call ignored: `step` with a cell traversal, a seed
+    /// without jitter, …). The parts of one frame (`render --region`) carry
+    /// it, and `snell merge` refuses parts whose fingerprints differ.
     pub fn frame_fingerprint(&self, volume_hash: u64) -> u64 {
         let b = &self.backdrop;
         let pattern = match &b.pattern {
@@ -504,17 +505,22 @@ impl Scene {
         render.clear_crossing_cells = true;
         render.skip_empty_approach = true;
         render.skip_clear_segments = true;
-        if render.traversal != Traversal::Step {
-            render.step = 0.0;
-        }
-        if render.supersampling == Supersampling::None {
-            render.samples = 0;
-            render.prss_samples = 0;
-            render.prss_map = PrssMap::default();
-            render.prss_fallback = PrssFallback::default();
-            render.footprint = FootprintFilter::default();
-            render.prss_curvature = 0.0;
-            render.seed = 0;
+        // A setting the frame does not read does not make another frame.
+        for (key, _) in resolve::unread_render_settings(&self.render) {
+            match key {
+                "render.step" => render.step = 0.0,
+                "render.leaf" => render.leaf = 0,
+                "render.samples" => render.samples = 0,
+                "render.seed" => render.seed = 0,
+                "render.prss_samples" => render.prss_samples = 0,
+                "render.prss_map" => render.prss_map = PrssMap::default(),
+                "render.prss_fallback" => render.prss_fallback = PrssFallback::default(),
+                "render.prss_curvature" => render.prss_curvature = 0.0,
+                "render.footprint" => render.footprint = FootprintFilter::default(),
+                // A key the list gains must be added here (a test sweeps
+                // every mode).
+                _ => debug_assert!(false, "{key} is not normalised for the fingerprint"),
+            }
         }
         let text = format!(
             "{}x{} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {pattern} {:?}",
@@ -880,9 +886,12 @@ checker = 8.0
         }
         let s = parse_text(|s| s.to_string(), &["volume.path=v.nrrd"]).unwrap();
         assert!(matches!(s.volume, VolumeSource::File { raw: None, .. }));
-        // A raw layout for a file whose name gives its format is refused,
-        // as the command line's --dims and --type are.
-        let e = parse_text(file_scene, &["volume.path=v.nrrd"])
+        // A --set of a file whose name gives its format drops the raw
+        // layout; one in the file itself is refused, as the command line's
+        // --dims and --type are.
+        let s = parse_text(file_scene, &["volume.path=v.nrrd"]).unwrap();
+        assert!(matches!(s.volume, VolumeSource::File { raw: None, .. }));
+        let e = parse_text(|s| file_scene(s).replace("v.raw", "v.nrrd"), &[])
             .unwrap_err()
             .to_string();
         assert!(
@@ -1067,6 +1076,62 @@ checker = 8.0
         );
     }
 
+    /// A setting the frame does not read leaves its fingerprint as it is;
+    /// one it reads changes it. Swept over every traversal, mode and
+    /// fallback, so each key the unread list can hold is normalised.
+    #[test]
+    fn fingerprints_ignore_the_unread_settings() {
+        let print = |o: &[String]| {
+            let o: Vec<String> = o.to_vec();
+            Scene::parse(SCENE, Path::new("t.toml"), &o)
+                .unwrap()
+                .frame_fingerprint(1)
+        };
+        let others = [
+            "render.step=0.5",
+            "render.leaf=4",
+            "render.samples=3",
+            "render.seed=5",
+            "render.prss_samples=4",
+            "render.prss_map=bilinear",
+            "render.prss_curvature=0.5",
+            "render.footprint=ewa",
+        ];
+        for traversal in ["step", "dda", "octree", "distance"] {
+            for mode in ["none", "grid", "jitter", "prss", "footprint"] {
+                for fallback in ["mirror", "blend", "blend-trace", "nearest", "trace"] {
+                    let classify = if traversal == "step" {
+                        "none"
+                    } else {
+                        "bezier"
+                    };
+                    let base: Vec<String> = [
+                        format!("render.traversal={traversal}"),
+                        format!("render.classify={classify}"),
+                        format!("render.supersampling={mode}"),
+                        format!("render.prss_fallback={fallback}"),
+                    ]
+                    .into();
+                    let scene = Scene::parse(SCENE, Path::new("t.toml"), &base).unwrap();
+                    let unread: Vec<&str> = resolve::unread_render_settings(&scene.render)
+                        .into_iter()
+                        .map(|(k, _)| k)
+                        .collect();
+                    let before = print(&base);
+                    for other in others {
+                        let key = other.split('=').next().unwrap();
+                        let after = print(&[base.clone(), vec![other.to_string()]].concat());
+                        assert_eq!(
+                            before == after,
+                            unread.contains(&key),
+                            "{base:?} + {other}: unread {unread:?}"
+                        );
+                    }
+                }
+            }
+        }
+    }
+
     /// Each anti-aliasing setting is reported where the supersampling mode
     /// (and PRSS's fallback) does not read it, and only there; so are the
     /// octree's leaf and a classification under step traversal.
@@ -1141,7 +1206,11 @@ checker = 8.0
                 ],
                 &all
             )),
-            sorted(&["render.seed=2", "render.prss_curvature=0.5"])
+            sorted(&[
+                "render.seed=2",
+                "render.prss_map=bilinear",
+                "render.prss_curvature=0.5"
+            ])
         );
         assert_eq!(
             ignored(&["render.traversal=distance", "render.leaf=4"]),

@@ -53,13 +53,20 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
     };
     // Switching a volume between file and phantom drops the other source,
     // whichever key of it the override names (`volume.phantom.kind` as
-    // much as the whole `volume.phantom` table): a scene has one.
+    // much as the whole `volume.phantom` table): a scene has one. A file
+    // whose name gives its format drops a raw layout too, which only a
+    // headerless file reads.
     if let (["volume", source, ..], Some(toml::Value::Table(volume))) =
         (parts.as_slice(), table.get_mut("volume"))
     {
         match *source {
             "path" => {
                 volume.remove("phantom");
+                if let toml::Value::String(p) = &parsed
+                    && crate::volume::Format::of(Path::new(p)).is_some()
+                {
+                    volume.remove("raw");
+                }
             }
             "phantom" => {
                 volume.remove("path");

@@ -19,10 +19,12 @@ use crate::human::exact;
 use crate::phantom::PhantomSpec;
 use crate::volume::{Endian, RawSpec, SampleType};
 
-/// Largest magnitude of a `backdrop.center` coordinate: rays reach a plane
-/// that far off at backdrop coordinates of about its distance, which the
-/// hit EXR's 32-bit floats (to 3.4e38) still hold at grazing angles of
-/// 1e-8 radians.
+/// Largest magnitude of a `backdrop.center` coordinate. A camera near the
+/// volume reaches a plane this far off at backdrop coordinates of about its
+/// distance, which the hit EXR's 32-bit floats (to 3.4e38) still hold at
+/// grazing angles of 1e-8 radians; a plane much further off overflows them
+/// for every view. (Not a bound for every geometry: a camera itself far
+/// off can still put its hits beyond them.)
 const MAX_BACKDROP_COORD: f64 = 1e30;
 
 /// The whole-number settings' ranges: checked when the scene is resolved,
@@ -136,30 +138,15 @@ pub(super) fn ignored_settings(
             "it applies to a checkerboard backdrop, not to a photograph".into(),
         ));
     }
-    if render.traversal != Traversal::Step {
-        unused.push((
-            "render.step",
-            format!(
-                "it is the step of traversal = \"step\"; the {} traversal finds crossings cell by cell",
-                setting_name(&render.traversal)
-            ),
-        ));
-    } else if f.render.classify.as_deref().is_some_and(|c| c != "none") {
+    if render.traversal == Traversal::Step
+        && f.render.classify.as_deref().is_some_and(|c| c != "none")
+    {
         unused.push((
             "render.classify",
             "step traversal samples every point and uses no classification".into(),
         ));
     }
-    if render.traversal != Traversal::Octree {
-        unused.push((
-            "render.leaf",
-            format!(
-                "it is the octree's leaf side; the {} traversal has no octree",
-                setting_name(&render.traversal)
-            ),
-        ));
-    }
-    unused.extend(unused_sampling(render));
+    unused.extend(unread_render_settings(render));
     if !surface.filter.smooths() {
         unused.push((
             "surface.lambda",
@@ -181,9 +168,37 @@ pub(super) fn ignored_settings(
         .collect()
 }
 
+/// The `[render]` settings the scene's traversal, supersampling and PRSS
+/// fallback do not read, each with why: the one list that the warnings
+/// (`ignored_settings`) and a `--region` part's frame fingerprint
+/// ([`Scene::frame_fingerprint`], which must not tell apart parts that
+/// differ only there) both follow.
+pub(super) fn unread_render_settings(render: &RenderSettings) -> Vec<(&'static str, String)> {
+    let mut unread = Vec::new();
+    let traversal = setting_name(&render.traversal);
+    if render.traversal != Traversal::Step {
+        unread.push((
+            "render.step",
+            format!(
+                "it is the step of traversal = \"step\"; the {traversal} traversal finds crossings cell by cell"
+            ),
+        ));
+    }
+    if render.traversal != Traversal::Octree {
+        unread.push((
+            "render.leaf",
+            format!(
+                "it is the leaf side of traversal = \"octree\"'s descent, which the {traversal} traversal does not make"
+            ),
+        ));
+    }
+    unread.extend(unread_sampling(render));
+    unread
+}
+
 /// The anti-aliasing settings the scene's supersampling (and PRSS
 /// fallback) does not read, each with the modes that do.
-fn unused_sampling(render: &RenderSettings) -> Vec<(&'static str, String)> {
+fn unread_sampling(render: &RenderSettings) -> Vec<(&'static str, String)> {
     use super::PrssFallback as F;
     use Supersampling as S;
     let mode = render.supersampling;
@@ -197,7 +212,9 @@ fn unused_sampling(render: &RenderSettings) -> Vec<(&'static str, String)> {
         ),
         ("render.seed", mode == S::Jitter, "jitter"),
         ("render.prss_samples", post, "prss and footprint"),
-        ("render.prss_map", post, "prss and footprint"),
+        // Footprint mode filters each pixel's own surface by its Jacobian:
+        // only PRSS interpolates the hit map.
+        ("render.prss_map", mode == S::Prss, "prss"),
         ("render.prss_fallback", post, "prss and footprint"),
         (
             "render.prss_curvature",

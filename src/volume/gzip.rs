@@ -70,6 +70,33 @@ impl<R: BufRead> Read for GzMembers<R> {
     }
 }
 
+/// The warning for what follows a volume's `count` samples: `n` more bytes
+/// of the file, or of the decompressed stream (counted up to
+/// [`DRAIN_LIMIT`], beyond which it says "at least").
+pub(super) fn after_samples(path: &Path, n: u64, count: usize, decompressed: bool) -> String {
+    let s = if n == 1 { "" } else { "s" };
+    let what = match (decompressed, n >= DRAIN_LIMIT) {
+        (false, _) => format!("{n} byte{s}"),
+        (true, false) => format!("{n} more decompressed byte{s}"),
+        (true, true) => format!("at least {n} more decompressed bytes"),
+    };
+    format!(
+        "{}: {what} after the {count} samples ignored",
+        path.display()
+    )
+}
+
+/// The warning for `n` bytes after the last gzip member that start no
+/// other ([`GzMembers::trailing`]).
+pub(super) fn after_gzip(path: &Path, n: u64) -> String {
+    format!(
+        "{}: {n} byte{} after the gzip data, not gzip, {} ignored",
+        path.display(),
+        if n == 1 { "" } else { "s" },
+        if n == 1 { "was" } else { "were" },
+    )
+}
+
 /// Reads `dec` on to its end, which checks the last member's CRC, handing
 /// each decompressed chunk to `each`; stops at [`DRAIN_LIMIT`] bytes unless
 /// `each` asked for the whole stream (returned `true`). Returns the bytes

@@ -690,11 +690,7 @@ fn samples_in(
         })?;
         let after = len - from - need;
         if after > 0 {
-            warnings.push(format!(
-                "{}: {after} byte{} after the {count} samples ignored",
-                file.path.display(),
-                if after == 1 { "" } else { "s" }
-            ));
+            warnings.push(super::gzip::after_samples(file.path, after, count, false));
         }
         let (samples, replaced) = decode(data)?;
         return Ok((samples, replaced, warnings));

@@ -10,7 +10,7 @@ use std::fs::File;
 use std::io::{BufReader, Seek, SeekFrom};
 use std::path::Path;
 
-use super::gzip::{DRAIN_LIMIT, GzMembers, drain};
+use super::gzip::{GzMembers, after_gzip, after_samples, drain};
 
 use super::raw::{
     byte_range, data_byte_len, finish_volume, gzip_error, map_file, max_gunzipped_len, read_full,
@@ -111,11 +111,7 @@ fn read_plain(path: &Path, file: File, opts: &LoadOptions) -> Result<Volume, Vol
     let mut vol = decode(path, &h, count, bytes, opts)?;
     let after = map.len() as u64 - end;
     if after > 0 {
-        let s = if after == 1 { "" } else { "s" };
-        vol.warnings.push(format!(
-            "{}: {after} byte{s} after the {count} samples ignored",
-            path.display()
-        ));
+        vol.warnings.push(after_samples(path, after, count, false));
     }
     Ok(vol)
 }
@@ -187,24 +183,10 @@ fn read_gzip(path: &Path, file: File, opts: &LoadOptions) -> Result<Volume, Volu
     let more = drain(path, &mut dec, |_| false)?;
     let mut vol = decode(path, &h, count, &buf, opts)?;
     if more > 0 {
-        let what = match (more, more >= DRAIN_LIMIT) {
-            (1, _) => "1 more decompressed byte".to_string(),
-            (n, false) => format!("{n} more decompressed bytes"),
-            (n, true) => format!("at least {n} more decompressed bytes"),
-        };
-        vol.warnings.push(format!(
-            "{}: {what} after the {count} samples ignored",
-            path.display()
-        ));
+        vol.warnings.push(after_samples(path, more, count, true));
     }
-    let n = dec.trailing;
-    if n > 0 {
-        vol.warnings.push(format!(
-            "{}: {n} byte{} after the gzip data, not gzip, {} ignored",
-            path.display(),
-            if n == 1 { "" } else { "s" },
-            if n == 1 { "was" } else { "were" },
-        ));
+    if dec.trailing > 0 {
+        vol.warnings.push(after_gzip(path, dec.trailing));
     }
     Ok(vol)
 }

@@ -27,7 +27,9 @@ pub fn bin() -> Command {
 /// `{root}` stands for the repository, `{data}` for the shared volumes'
 /// folder, `{sphere}`, `{lobster}`, `{photo}` and `{cranium}` for those
 /// scenes' files, and `{tooth}` and `{headsq}` for the tooth CT and the raw
-/// head CT (split first, so a path with a space stays one argument).
+/// head CT (split first, so a path a placeholder stands for stays one
+/// argument even with a space in it; a path pasted into `line` must have
+/// none).
 pub fn args(line: &str) -> Vec<String> {
     let path = |p: PathBuf| p.to_str().unwrap().to_string();
     let vars = [

@@ -41,7 +41,7 @@ mod data;
 mod header;
 mod layout;
 
-use super::gzip::DRAIN_LIMIT;
+use super::gzip::{after_gzip, after_samples};
 use data::{ascii_region, gzip_region, raw_region};
 use header::parse_header;
 use layout::Layout;
@@ -213,7 +213,7 @@ fn with_data<T>(
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 struct Extra {
     /// Bytes after the samples (raw), or after them in the decompressed
-    /// stream (gzip): at least this many, counting stops at [`DRAIN_LIMIT`].
+    /// stream (gzip): at least this many, counting stops at [`DRAIN_LIMIT`](super::gzip::DRAIN_LIMIT).
     data: u64,
     /// Bytes after the last gzip member that do not start another.
     after_gzip: u64,
@@ -231,28 +231,19 @@ impl Extra {
     /// `encoding`.
     fn warnings(self, path: &Path, encoding: Encoding, count: usize) -> Vec<String> {
         let mut out = Vec::new();
-        if self.data > 0 {
-            let n = self.data;
-            let s = if n == 1 { "" } else { "s" };
-            let what = match (encoding, n >= DRAIN_LIMIT) {
-                (Encoding::Raw, _) => format!("{n} byte{s}"),
-                (Encoding::Ascii, _) => format!("{n} more value{s}"),
-                (Encoding::Gzip, false) => format!("{n} more decompressed byte{s}"),
-                (Encoding::Gzip, true) => format!("at least {n} more decompressed bytes"),
-            };
-            out.push(format!(
-                "{}: {what} after the {count} samples ignored",
-                path.display()
-            ));
+        let n = self.data;
+        if n > 0 {
+            out.push(match encoding {
+                Encoding::Ascii => format!(
+                    "{}: {n} more value{} after the {count} samples ignored",
+                    path.display(),
+                    if n == 1 { "" } else { "s" }
+                ),
+                e => after_samples(path, n, count, e == Encoding::Gzip),
+            });
         }
         if self.after_gzip > 0 {
-            let n = self.after_gzip;
-            out.push(format!(
-                "{}: {n} byte{} after the gzip data, not gzip, {} ignored",
-                path.display(),
-                if n == 1 { "" } else { "s" },
-                if n == 1 { "was" } else { "were" },
-            ));
+            out.push(after_gzip(path, self.after_gzip));
         }
         out
     }
