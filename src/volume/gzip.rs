@@ -1,7 +1,8 @@
 //! Gzip streams as the readers take them: members read as one stream, bytes
 //! after the last member that start no other counted rather than refused,
 //! and what follows the samples read (so the last member's CRC is checked)
-//! and counted for a warning.
+//! and counted; and the warnings every reader gives for what follows a
+//! volume's samples, in the file or in its decompressed stream.
 
 use std::io::{self, BufRead, Read};
 use std::path::Path;
