@@ -130,6 +130,19 @@ impl<T: Coefficient> Coeffs<T> {
         Coeffs::from_interior(vol.dims(), vol.samples(), |v: &f32| T::from_f64(*v as f64))
     }
 
+    /// A zeroed padded grid for `dims`, its pages advised huge, for the
+    /// constructors to fill.
+    fn zeroed(dims: [usize; 3]) -> Coeffs<T> {
+        let padded = dims.map(|n| n + 2 * APRON);
+        let mut grid = Coeffs {
+            dims,
+            padded,
+            data: vec![T::default(); padded[0] * padded[1] * padded[2]],
+        };
+        crate::heap::advise_huge_pages(&mut grid.data);
+        grid
+    }
+
     /// Builds a padded grid from x-fastest interior values, converting each.
     ///
     /// A large grid is filled a z slab per task: the fill is the first touch
@@ -143,13 +156,8 @@ impl<T: Coefficient> Coeffs<T> {
         conv: impl Fn(&S) -> T + Sync,
     ) -> Coeffs<T> {
         assert_eq!(src.len(), dims[0] * dims[1] * dims[2]);
-        let padded = dims.map(|n| n + 2 * APRON);
-        let mut grid = Coeffs {
-            dims,
-            padded,
-            data: vec![T::default(); padded[0] * padded[1] * padded[2]],
-        };
-        crate::heap::advise_huge_pages(&mut grid.data);
+        let mut grid = Coeffs::zeroed(dims);
+        let padded = grid.padded;
         let [nx, ny, nz] = dims;
         let slab = padded[0] * padded[1];
         let fill = |z: usize, slab_data: &mut [T]| {
@@ -188,13 +196,7 @@ impl<T: Coefficient> Coeffs<T> {
         dims: [usize; 3],
         mut row: impl FnMut(&mut [T]) -> Result<(), E>,
     ) -> Result<Coeffs<T>, E> {
-        let padded = dims.map(|n| n + 2 * APRON);
-        let mut grid = Coeffs {
-            dims,
-            padded,
-            data: vec![T::default(); padded[0] * padded[1] * padded[2]],
-        };
-        crate::heap::advise_huge_pages(&mut grid.data);
+        let mut grid = Coeffs::zeroed(dims);
         let [nx, ny, nz] = dims;
         for z in 0..nz {
             for y in 0..ny {
