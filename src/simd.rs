@@ -9,8 +9,11 @@
 //!
 //! Each ray's result depends only on its own inputs, never on which lane or
 //! chunk it lands in, so output is identical for any thread count or tile
-//! size. Fused and unfused multiply-adds round differently, so two machines
-//! with different instruction sets may differ in the last bits.
+//! size. Every level fuses its multiply-adds ([`Fused`]; the portable one
+//! with the scalar FMA instruction where the CPU has it, else the C
+//! library's `fma`, see [`portable_run`]) and the vector kernels' sums keep
+//! one order, so the levels, and machines of different instruction sets,
+//! give the same bits.
 
 use std::sync::OnceLock;
 
@@ -200,11 +203,38 @@ macro_rules! with_isa {
             }
             _ => {
                 const $L: usize = 2;
-                type $M = $crate::simd::Plain;
-                $body
+                type $M = $crate::simd::Fused;
+                $crate::simd::portable_run(
+                    #[inline(always)]
+                    || $body,
+                )
             }
         }
     }};
+}
+
+/// Runs `f`, the portable level's lane code, with the scalar FMA
+/// instruction where the CPU has it: every level's multiply-adds are fused
+/// ([`Fused`]), so that all give the same bits. Without the instruction
+/// each `mul_add` is a call into the C library's correctly rounded `fma`:
+/// the same bits, at a cost (portable sphere and teapot frames 3.5–4× slower
+/// on this project's CPU with every `mul_add` such a call, where the library
+/// still uses the instruction; more where it computes `fma` in software).
+#[inline(always)]
+pub fn portable_run<R>(f: impl FnOnce() -> R) -> R {
+    #[cfg(target_arch = "x86_64")]
+    {
+        #[target_feature(enable = "fma")]
+        unsafe fn with_fma<R>(f: impl FnOnce() -> R) -> R {
+            f()
+        }
+        static FMA: OnceLock<bool> = OnceLock::new();
+        if *FMA.get_or_init(|| std::arch::is_x86_feature_detected!("fma")) {
+            // SAFETY: the CPU has FMA (checked above).
+            return unsafe { with_fma(f) };
+        }
+    }
+    f()
 }
 
 /// Value and gradient of a cubic (support 4) tensor spline from its 4³
@@ -261,6 +291,47 @@ pub unsafe fn cubic_value_grad<T: Row4>(
     (
         dot(rv, &w[0]),
         [dot(rv, &d[0]), dot(ry, &w[0]), dot(rz, &w[0])],
+    )
+}
+
+/// [`cubic_value_grad`] without vector instructions, bitwise its result:
+/// the same fused multiply-adds in the same order (`f64::mul_add`), and its
+/// final dot products as `(p0 + p2) + (p1 + p3)`, so that a CPU without AVX2
+/// (`SNELL_ISA=portable`, or another architecture) renders the same bits.
+/// Where the CPU has no FMA, `mul_add` is the C library's correctly rounded
+/// `fma`: slower, the same result.
+#[inline(always)]
+pub fn cubic_value_grad_scalar<T: Into<f64> + Copy>(
+    nb: &[T],
+    sy: usize,
+    sz: usize,
+    w: &[[f64; 4]; 3],
+    d: &[[f64; 4]; 3],
+) -> (f64, [f64; 3]) {
+    let (mut rv, mut ry, mut rz) = ([0.0f64; 4], [0.0f64; 4], [0.0f64; 4]);
+    for k in 0..4 {
+        let (mut pk, mut qk) = ([0.0f64; 4], [0.0f64; 4]);
+        for j in 0..4 {
+            let row = &nb[j * sy + k * sz..][..4];
+            for i in 0..4 {
+                let c: f64 = row[i].into();
+                pk[i] = w[1][j].mul_add(c, pk[i]);
+                qk[i] = d[1][j].mul_add(c, qk[i]);
+            }
+        }
+        for i in 0..4 {
+            rv[i] = w[2][k].mul_add(pk[i], rv[i]);
+            ry[i] = w[2][k].mul_add(qk[i], ry[i]);
+            rz[i] = d[2][k].mul_add(pk[i], rz[i]);
+        }
+    }
+    let dot = |r: &[f64; 4], x: &[f64; 4]| {
+        let p: [f64; 4] = std::array::from_fn(|i| r[i] * x[i]);
+        (p[0] + p[2]) + (p[1] + p[3])
+    };
+    (
+        dot(&rv, &w[0]),
+        [dot(&rv, &d[0]), dot(&ry, &w[0]), dot(&rz, &w[0])],
     )
 }
 

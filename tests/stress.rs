@@ -318,6 +318,52 @@ fn cases() -> Vec<Case> {
             },
         ),
         (
+            "a fill value (NetCDF's 9.97e36) in a slab along one face and a corner voxel, away from a ball's surface (f32, iso 0.5), linear",
+            "the surface does not move: the frame is bitwise the one without the fill",
+            || {
+                // A smooth ball from 0 to 1, with and without the fill; the
+                // view keeps to the middle, where no ray meets the slab.
+                let ball = |x: f64, y: f64, z: f64| {
+                    let r = ((x - 19.5).powi(2) + (y - 19.5).powi(2) + (z - 19.5).powi(2)).sqrt();
+                    1.0 / (1.0 + ((r - 10.0) / 1.5).exp())
+                };
+                let fill = 9.96921e36;
+                let filled = move |x: f64, y: f64, z: f64| {
+                    if x < 3.0 || x + y + z == 0.0 {
+                        fill
+                    } else {
+                        ball(x, y, z)
+                    }
+                };
+                let set = [
+                    &SHELL_VIEW[..3],
+                    &[
+                        "camera.fov_y=10.0",
+                        "surface.filter=linear",
+                        "surface.iso=0.5",
+                        "surface.ior=1.1",
+                    ],
+                ]
+                .concat();
+                let clean = render(&sphere(48, &set), Some(volume([40; 3], ball)));
+                let with_fill = render(&sphere(48, &set), Some(volume([40; 3], filled)));
+                let f = |h: &Frame| {
+                    let m = &h.film;
+                    m.u.iter()
+                        .chain(&m.v)
+                        .chain(&m.events)
+                        .map(|x| x.to_bits())
+                        .collect::<Vec<_>>()
+                };
+                let (a, b) = (f(&with_fill), f(&clean));
+                let differ = a.iter().zip(&b).filter(|(x, y)| x != y).count();
+                let r = clean.stats.counters.refractions;
+                assert!(r > 500, "{r} refractions: the ball is in view");
+                assert_eq!(differ, 0, "{differ} of {} hit values differ", a.len());
+                format!("{r} refractions; {differ} of {} hit values differ", a.len())
+            },
+        ),
+        (
             "one-voxel-thick shell (u8-like, r = 12 +- 0.5), linear",
             "both walls found: >= 4 events through the middle; dda = dense step on >= 99%",
             || {

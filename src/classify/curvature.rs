@@ -72,6 +72,12 @@ impl CurvatureBounds {
         Some(CurvatureBounds { index, bounds })
     }
 
+    /// Bounds [`CurvatureBounds::build`] made before (the disk cache's), in
+    /// `index`'s slot order; `None` unless there is one per tagged cell.
+    pub fn from_parts(index: Arc<TaggedIndex>, bounds: Vec<HessianBound>) -> Option<Self> {
+        (bounds.len() == index.count()).then_some(CurvatureBounds { index, bounds })
+    }
+
     /// Where cell `c`'s (in range) bound is; `None` when the cell is not
     /// tagged. A lookup in two ([`CurvatureBounds::at`]), so callers can
     /// prefetch the bound before they read it.

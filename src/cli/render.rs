@@ -43,8 +43,9 @@ pub struct Args {
     /// Override a scene value, e.g. --set surface.ior=1.33 (repeatable).
     #[arg(long = "set", value_name = "SECTION.KEY=VALUE")]
     pub set: Vec<String>,
-    /// Keep prefiltered coefficients, cell tags and sub-cell masks in DIR,
-    /// keyed by the volume's content hash, and reuse them in later runs (a
+    /// Keep prefiltered coefficients, cell tags, sub-cell masks and
+    /// curvature bounds in DIR, keyed by the volume's content hash, and
+    /// reuse them in later runs (a
     /// re-render with a new camera, ior or backdrop skips the classification
     /// and reads the coefficients instead of prefiltering).
     /// A missing DIR is created (with a warning), a missing parent refused.
@@ -54,7 +55,7 @@ pub struct Args {
     /// frame split across jobs. The PNG holds the region; the EXRs place it in
     /// the whole image (OpenEXR data window), for `snell merge`. The pixels
     /// are bitwise those of a whole-frame render.
-    #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true)]
+    #[arg(long, value_name = "X0,Y0,X1,Y1", allow_hyphen_values = true, value_parser = region_value)]
     pub region: Option<String>,
     #[command(flatten)]
     pub limit: MemoryLimit,
@@ -180,8 +181,18 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let (lo, hi) = prep.volume.value_range();
     let iso = scene.surface.iso;
     if !(iso >= lo as f64 && iso <= hi as f64) {
+        // Trilinear interpolation stays within the samples' range; the other
+        // filters overshoot it next to sharp edges.
+        let shows = if scene.surface.filter == snell::filter::FilterKind::Linear {
+            "the image shows only the backdrop".to_string()
+        } else {
+            format!(
+                "a surface shows only where {} overshoots the samples (next to sharp edges), if anywhere",
+                scene.surface.filter.name()
+            )
+        };
         eprintln!(
-            "warning: {}: iso-value {iso} is outside the data range [{lo}, {hi}]; the image shows only the backdrop",
+            "warning: {}: iso-value {iso} is outside the data range [{lo}, {hi}]; {shows}",
             a.scene.display()
         );
     }
@@ -592,6 +603,18 @@ fn frame_count(s: &str) -> Result<u32, String> {
         Ok(n) if (1..=max).contains(&n) => Ok(n),
         _ => Err(format!("must be from 1 to {max}, got {n}")),
     }
+}
+
+/// `--region`'s value as given. Hyphens are allowed so that `-1,0,8,8` meets
+/// [`parse_region`]'s message rather than clap's "unexpected argument"; an
+/// option in its place (`--region --cache d`) means the value was forgotten.
+fn region_value(s: &str) -> Result<String, String> {
+    if s.starts_with("--") {
+        return Err(format!(
+            "expected X0,Y0,X1,Y1, found the option '{s}' (the region was left out)"
+        ));
+    }
+    Ok(s.to_string())
 }
 
 /// `X0,Y0,X1,Y1`: a non-empty pixel rectangle inside the `width × height` image.

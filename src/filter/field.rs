@@ -71,6 +71,11 @@ pub struct Field<T: Coefficient = f64> {
     coeffs: Coeffs<T>,
     /// Largest coefficient magnitude (computed once; see `separating_iso`).
     max_abs: f64,
+    /// Which binary exponents the coefficients' magnitudes have (bit `e` of
+    /// the 2048: a magnitude in `[2^(e−1023), 2^(e−1022))`, zero in bit 0),
+    /// for the largest magnitude below a bound ([`Field::separating_iso`]);
+    /// counted on first use, which only fields with outliers have.
+    exponents: std::sync::OnceLock<[u64; 32]>,
     /// What the coefficients are relative to (0 unless shifted).
     offset: f64,
 }
@@ -131,6 +136,7 @@ impl<T: Coefficient> Field<T> {
             kernel: kind.kernel(),
             coeffs,
             max_abs,
+            exponents: std::sync::OnceLock::new(),
             offset: 0.0,
         }
     }
@@ -186,11 +192,50 @@ impl<T: Coefficient> Field<T> {
     /// summation noise (≈1e-14 of the coefficient scale) yet far below any
     /// geometric tolerance, makes "equal to the iso-value" reliably outside.
     ///
+    /// The scale is the largest coefficient magnitude up to a million times
+    /// the iso-value's (any, for an iso-value of 0): a sentinel or fill value
+    /// far beyond the data (1e20, NetCDF's 9.97e36) would otherwise move the
+    /// whole surface by its 1e-11, or off the data altogether. Magnitudes
+    /// are counted by binary exponent ([`Field::from_coeffs`]), so the scale
+    /// is the bound of the largest one's power of two, within 2× of it.
+    ///
     /// The result is in the frame of the stored coefficients (`iso` less
     /// [`Field::offset`]): what evaluations are compared with.
     pub fn separating_iso(&self, iso: f64) -> f64 {
+        let scale = self.magnitude_up_to(1e6 * iso.abs());
         let iso = iso - self.offset;
-        iso + 1e-11 * iso.abs().max(self.max_abs_coeff()).max(f64::MIN_POSITIVE)
+        iso + 1e-11 * iso.abs().max(scale).max(f64::MIN_POSITIVE)
+    }
+
+    /// The largest coefficient magnitude not above `bound` (a 0 bound: none),
+    /// rounded up to its power of two; the largest of all where none is
+    /// that small.
+    fn magnitude_up_to(&self, bound: f64) -> f64 {
+        if bound == 0.0 || self.max_abs <= bound {
+            return self.max_abs;
+        }
+        let exponent = |a: f64| ((a.to_bits() >> 52) & 0x7ff) as usize;
+        let exponents = self.exponents.get_or_init(|| {
+            use rayon::prelude::*;
+            self.coeffs
+                .data()
+                .par_chunks(1 << 16)
+                .map(|chunk| {
+                    let mut set = [0u64; 32];
+                    for c in chunk {
+                        let e = exponent(c.to_f64().abs());
+                        set[e / 64] |= 1 << (e % 64);
+                    }
+                    set
+                })
+                .reduce(|| [0; 32], |a, b| std::array::from_fn(|i| a[i] | b[i]))
+        });
+        (0..=exponent(bound))
+            .rev()
+            .find(|&e| exponents[e / 64] >> (e % 64) & 1 == 1)
+            .map_or(self.max_abs, |e| {
+                f64::from_bits(((e as u64 + 1).min(0x7fe)) << 52).min(bound)
+            })
     }
 
     /// Maps a grid coordinate into the domain `[0, n-1]` by the mirror symmetry
@@ -288,13 +333,33 @@ impl<T: Coefficient> Field<T> {
     /// needs one gradient at a time calls.
     #[inline(always)]
     pub fn value_grad_fast<const S: usize>(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
-        #[cfg(target_arch = "x86_64")]
-        if S == 4 && crate::simd::Isa::current() != crate::simd::Isa::Portable {
-            // SAFETY: support 4 and AVX2/FMA/F16C (every non-portable
-            // level, `Isa::detect`) checked above.
-            return unsafe { self.cubic_value_grad_in(p) };
+        if S == 4 {
+            #[cfg(target_arch = "x86_64")]
+            if crate::simd::Isa::current() != crate::simd::Isa::Portable {
+                // SAFETY: support 4 and AVX2/FMA/F16C (every non-portable
+                // level, `Isa::detect`) checked above.
+                return unsafe { self.cubic_value_grad_in(p) };
+            }
+            return self.cubic_value_grad_portable(p);
         }
         self.value_grad_in::<S>(p)
+    }
+
+    /// [`Field::cubic_value_grad_in`] without vector instructions, bitwise its
+    /// result ([`crate::simd::cubic_value_grad_scalar`]): the instruction
+    /// set does not change a cubic filter's normals.
+    #[inline(always)]
+    fn cubic_value_grad_portable(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+        let mut w = [[0.0; 4]; 3];
+        let mut d = [[0.0; 4]; 3];
+        let mut k = [0isize; 3];
+        for a in 0..3 {
+            let (ka, t) = self.kernel.locate(p[a]);
+            k[a] = ka;
+            (w[a], d[a]) = self.kernel.weights_and_derivs::<4>(t);
+        }
+        let (nb, sy, sz) = self.neighbourhood::<4>(self.coeffs.offset(k[0], k[1], k[2]));
+        crate::simd::cubic_value_grad_scalar(nb, sy, sz, &w, &d)
     }
 
     /// [`Field::value_grad_batch`] for cubic kernels over `f64` coefficients
@@ -648,6 +713,31 @@ mod tests {
             }
         }
         Volume::new(dims, [1.0; 3], SampleType::F32, s).unwrap()
+    }
+
+    /// The nudge scales with the data near the iso-value's magnitude, not
+    /// with a fill value a million times beyond it; an iso-value of 0 keeps
+    /// the largest coefficient's scale.
+    #[test]
+    fn separating_iso_ignores_outliers() {
+        let mut vol = ramp([6, 5, 4]);
+        let data: Vec<f32> = vol.samples().to_vec();
+        let plain = Field::new(&vol, FilterKind::Linear);
+        let eps = |f: &Field, iso: f64| f.separating_iso(iso) - iso;
+        let near = |a: f64, b: f64| (a - b).abs() <= 1e-4 * b;
+        assert!(near(eps(&plain, 10.0), 1e-11 * plain.max_abs_coeff()));
+        let mut filled = data.clone();
+        filled[7] = 9.96921e36;
+        vol = Volume::new([6, 5, 4], [1.0; 3], SampleType::F32, filled).unwrap();
+        let f = Field::new(&vol, FilterKind::Linear);
+        // The ramp's largest value rounded up to its power of two (64).
+        assert!(near(eps(&f, 10.0), 1e-11 * 64.0));
+        assert!(eps(&f, 10.0) >= eps(&plain, 10.0));
+        assert!(near(eps(&f, 0.0), 1e-11 * f.max_abs_coeff()));
+        // Everything beyond the bound: the largest of all, as before.
+        let big = Volume::new([2; 3], [1.0; 3], SampleType::F32, vec![1e30; 8]).unwrap();
+        let f = Field::new(&big, FilterKind::Linear);
+        assert!(near(eps(&f, 1.0), 1e-11 * 1e30f32 as f64));
     }
 
     #[test]

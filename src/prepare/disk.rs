@@ -1,5 +1,6 @@
-//! The cache directory's files: prefiltered coefficients, and cell tags
-//! with the sub-cell masks the classification found, each with a magic, its
+//! The cache directory's files: prefiltered coefficients, cell tags with
+//! the sub-cell masks the classification found, and the tagged cells'
+//! curvature bounds, each with a magic, its
 //! key's parameters and a closing checksum of its values, so a damaged or
 //! foreign file is refused (and rebuilt), never trusted.
 
@@ -7,6 +8,7 @@ use std::io::{Read, Write};
 use std::path::Path;
 
 use crate::classify::Tags;
+use crate::classify::curvature::HessianBound;
 use crate::classify::masks::LinearMasks;
 use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
@@ -20,6 +22,7 @@ use crate::volume::WordHash;
 const FIELD_MAGIC: &[u8; 8] = b"SNLCOEF2";
 const TAGS_MAGIC: &[u8; 8] = b"SNLTAGS3";
 const OLD_TAGS_MAGIC: &[u8; 8] = b"SNLTAGS2";
+const CURVATURE_MAGIC: &[u8; 8] = b"SNLCURV1";
 
 /// Reads the checksum that ends a file and compares it with `sum`, the hash
 /// of the file's values: a damaged file of the right length (a flipped bit,
@@ -211,4 +214,58 @@ pub(super) fn read_tags(path: &Path, lattice: &Lattice) -> std::io::Result<(Tags
     }
     let tags = Tags::from_words(lattice.cells, words).ok_or_else(|| bad("bad tag words"))?;
     Ok((tags, masks))
+}
+
+/// The curvature bounds of the tagged cells, in slot order: one
+/// [`HessianBound`] per tagged cell, as `f32` bits.
+pub(super) fn write_curvature(w: &mut dyn Write, bounds: &[HessianBound]) -> std::io::Result<()> {
+    w.write_all(CURVATURE_MAGIC)?;
+    write_u64s(w, &[bounds.len() as u64])?;
+    let mut sum = WordHash::new();
+    let mut buf = Vec::with_capacity(bounds.len().min(1 << 16) * 24);
+    for chunk in bounds.chunks(1 << 16) {
+        buf.clear();
+        for b in chunk {
+            for v in b {
+                buf.extend_from_slice(&v.to_bits().to_le_bytes());
+                sum.add(u64::from(v.to_bits()));
+            }
+        }
+        w.write_all(&buf)?;
+    }
+    write_u64s(w, &[sum.value()])
+}
+
+/// What [`write_curvature`] wrote, for `tagged` tagged cells. A negative
+/// bound is refused: it would clear cells the surface crosses (an infinite
+/// or NaN one clears nothing, as when it was built).
+pub(super) fn read_curvature(path: &Path, tagged: usize) -> std::io::Result<Vec<HessianBound>> {
+    let mut r = std::io::BufReader::new(crate::input::open(path)?);
+    if read_exact_vec(&mut r, 8)? != CURVATURE_MAGIC {
+        return Err(bad("not a curvature cache file"));
+    }
+    if read_u64(&mut r)? != tagged as u64 {
+        return Err(bad("count differs from the tagged cells'"));
+    }
+    let mut sum = WordHash::new();
+    let mut bounds = Vec::with_capacity(tagged);
+    let mut raw = [0u8; 24];
+    for _ in 0..tagged {
+        r.read_exact(&mut raw)?;
+        let b: HessianBound = std::array::from_fn(|i| {
+            let bits = u32::from_le_bytes(raw[4 * i..4 * i + 4].try_into().unwrap());
+            sum.add(u64::from(bits));
+            f32::from_bits(bits)
+        });
+        if b.iter().any(|&v| v < 0.0) {
+            return Err(bad("negative curvature bound"));
+        }
+        bounds.push(b);
+    }
+    check_sum(&mut r, sum)?;
+    let mut b = [0u8; 1];
+    if r.read(&mut b)? != 0 {
+        return Err(bad("trailing data"));
+    }
+    Ok(bounds)
 }

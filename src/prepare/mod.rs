@@ -31,7 +31,9 @@ use crate::volume::{LoadOptions, Volume};
 
 mod disk;
 
-use disk::{field_name, read_field, read_tags, write_field, write_tags};
+use disk::{
+    field_name, read_curvature, read_field, read_tags, write_curvature, write_field, write_tags,
+};
 
 /// Runs `$body` with `$f` bound to the `&Arc<Field<T>>` inside an
 /// [`AnyField`], whatever its storage `T`.
@@ -595,6 +597,9 @@ impl Cache {
                 f
             }
         };
+        // Where the curvature bounds go once built, when the disk cache had
+        // none for a new accel.
+        let mut curvature_to_write = None;
         let accel = match needs_accel(scene) {
             None => None,
             Some(method) => {
@@ -603,17 +608,26 @@ impl Cache {
                 match self.accels.get(&akey) {
                     Some(a) => Some(a.clone()),
                     None => {
-                        let name =
-                            format!("{}-{:016x}-{}.tags", fkey.1, iso.to_bits(), method.name());
-                        let disk = self.disk_path(hash, &name);
+                        let name = format!("{}-{:016x}-{}", fkey.1, iso.to_bits(), method.name());
+                        let disk = self.disk_path(hash, &format!("{name}.tags"));
                         let lattice = Lattice::new(field.kernel(), field.dims());
                         let cached = disk.as_deref().and_then(|p| self.read_tags(p, &lattice));
                         let from_disk = cached.is_some();
-                        let (a, cs, os) = build_accel(&field, iso, method, cached);
+                        let (mut a, cs, mut os) = build_accel(&field, iso, method, cached);
                         if !from_disk && let Some(p) = &disk {
-                            let found = a.found_masks.lock().unwrap_or_else(|e| e.into_inner());
+                            // Not shared yet: the masks need no lock.
+                            let found = a.found_masks.get_mut().unwrap_or_else(|e| e.into_inner());
                             let masks = found.as_deref().unwrap_or_default();
                             self.write_or_warn(p, |w| write_tags(w, a.octree.tags(), masks));
+                        }
+                        if scene.render.clears_crossing_cells()
+                            && let Some(p) = self.disk_path(hash, &format!("{name}.curv"))
+                        {
+                            let start = Instant::now();
+                            if !self.seed_curvature(&a, &p) {
+                                curvature_to_write = Some(p);
+                            }
+                            os += start.elapsed().as_secs_f64();
                         }
                         times.classify_s = cs;
                         times.octree_s = os;
@@ -632,6 +646,11 @@ impl Cache {
             content_hash: self.dir.is_some().then_some(hash),
         };
         p.ready_for(&scene.render);
+        if let Some(path) = curvature_to_write
+            && let Some(b) = p.accel.as_ref().and_then(|a| a.curvature.get()?.as_ref())
+        {
+            self.write_or_warn(&path, |w| write_curvature(w, b.parts().1));
+        }
         let t = &p.times;
         if t.load_s + t.prefilter_s + t.classify_s + t.octree_s > 0.0 {
             // Something was built: its transients go back to the kernel.
@@ -685,6 +704,25 @@ impl Cache {
                 self.warnings
                     .push(format!("cache: ignoring {}: {e}", path.display()));
                 None
+            }
+        }
+    }
+
+    /// Gives `a` the curvature bounds the cache keeps at `path`, if it has
+    /// them for these tags; whether it did.
+    fn seed_curvature(&mut self, a: &Accel, path: &Path) -> bool {
+        if !path.exists() {
+            return false;
+        }
+        match read_curvature(path, a.octree.tags().count()) {
+            Ok(bounds) => {
+                let b = CurvatureBounds::from_parts(a.tagged(), bounds);
+                b.is_some() && a.curvature.set(b).is_ok()
+            }
+            Err(e) => {
+                self.warnings
+                    .push(format!("cache: ignoring {}: {e}", path.display()));
+                false
             }
         }
     }
@@ -852,7 +890,8 @@ mod tests {
             .unwrap()
             .map(|e| e.unwrap().path())
             .collect();
-        assert_eq!(files.len(), 2, "{files:?}");
+        // Coefficients, tags with masks, curvature bounds.
+        assert_eq!(files.len(), 3, "{files:?}");
         let mut fresh = Cache::with_dir(&dir).unwrap();
         let second = fresh.prepare(&s, &LoadOptions::default()).unwrap();
         assert!(fresh.warnings.is_empty(), "{:?}", fresh.warnings);
@@ -886,6 +925,47 @@ mod tests {
         );
         let masks = |a: &Accel, f: &AnyField| a.masks(f).0.unwrap().parts().1.to_vec();
         assert_eq!(masks(a1, &first.field), masks(a2, &second.field));
+        // The curvature bounds come back from their file, as built, and
+        // were not built again (already there before `ready_for` asked).
+        let bits = |a: &Accel| {
+            let b = a.curvature.get().unwrap().as_ref().unwrap().parts().1;
+            b.iter()
+                .flatten()
+                .map(|v| v.to_bits())
+                .collect::<Vec<u32>>()
+        };
+        assert!(!bits(a1).is_empty());
+        assert_eq!(bits(a1), bits(a2));
+        // What a warm cache renders with is the file's (bounds that no
+        // build gives, written in its place), not a rebuild.
+        let curv = files.iter().find(|f| f.extension().unwrap() == "curv");
+        let count = a1.octree.tags().count();
+        let kept = std::fs::read(curv.unwrap()).unwrap();
+        let mut planted = Vec::new();
+        disk::write_curvature(&mut planted, &vec![[7.0f32; 6]; count]).unwrap();
+        std::fs::write(curv.unwrap(), &planted).unwrap();
+        let read = Cache::with_dir(&dir)
+            .unwrap()
+            .prepare(&s, &LoadOptions::default())
+            .unwrap();
+        assert_eq!(
+            bits(read.accel.as_ref().unwrap()),
+            vec![7.0f32.to_bits(); 6 * count]
+        );
+        std::fs::write(curv.unwrap(), &kept).unwrap();
+        // A bound below zero would clear cells the surface crosses: refused
+        // even behind a good checksum.
+        let mut negative = vec![[1.0f32; 6]; count];
+        negative[count / 2][3] = -1.0;
+        let mut bytes = Vec::new();
+        disk::write_curvature(&mut bytes, &negative).unwrap();
+        let bad = dir.join("negative.curv");
+        std::fs::write(&bad, &bytes).unwrap();
+        let e = read_curvature(&bad, count).unwrap_err().to_string();
+        assert!(e.contains("negative"), "{e}");
+        assert!(read_curvature(&bad, count + 1).is_err(), "count checked");
+        std::fs::remove_file(&bad).unwrap();
+        assert!(read_curvature(curv.unwrap(), count).is_ok());
         // Damage every file, cut short or one bit flipped in its values (the
         // length unchanged): the cache warns, rebuilds, and gets the same
         // answer.
@@ -902,7 +982,7 @@ mod tests {
             }
             let mut broken = Cache::with_dir(&dir).unwrap();
             let third = broken.prepare(&s, &LoadOptions::default()).unwrap();
-            assert_eq!(broken.warnings.len(), 2, "{:?}", broken.warnings);
+            assert_eq!(broken.warnings.len(), 3, "{:?}", broken.warnings);
             if flip {
                 assert!(
                     broken.warnings.iter().all(|w| w.contains("checksum")),
@@ -918,6 +998,7 @@ mod tests {
                 first.accel.as_ref().unwrap().octree.tags(),
                 third.accel.as_ref().unwrap().octree.tags()
             );
+            assert_eq!(bits(a1), bits(third.accel.as_ref().unwrap()));
         }
         std::fs::remove_dir_all(&dir).unwrap();
     }

@@ -1,8 +1,10 @@
 //! Work counters and per-stage times: the profile users read after a render.
 //!
 //! Counters are integers summed over tiles, so they are identical for any
-//! thread count; times are wall-clock sums over tiles (CPU time spent in each
-//! stage, across threads).
+//! thread count; stage times are each thread's wall-clock time in the
+//! stage, summed over threads (`stage_cpu_s`, "thread ms"): the stage's CPU
+//! time while the threads run undisturbed, more on a loaded machine, where
+//! a thread waiting for a core is still counted.
 
 use std::time::Duration;
 
@@ -220,11 +222,14 @@ impl RenderStats {
                 p.octree_s * 1e3
             ));
         }
-        s.push_str("stage      cpu ms   share\n");
+        s.push_str(&format!(
+            "{:9} {:>9} {:>7}\n",
+            "stage", "thread ms", "share"
+        ));
         for st in STAGES {
             let t = self.stage_times.get(st).as_secs_f64();
             s.push_str(&format!(
-                "{:9} {:8.2} {:6.1}%\n",
+                "{:9} {:9.2} {:6.1}%\n",
                 st.name(),
                 t * 1e3,
                 100.0 * t / total

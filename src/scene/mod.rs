@@ -506,21 +506,8 @@ impl Scene {
         render.skip_empty_approach = true;
         render.skip_clear_segments = true;
         // A setting the frame does not read does not make another frame.
-        for (key, _) in resolve::unread_render_settings(&self.render) {
-            match key {
-                "render.step" => render.step = 0.0,
-                "render.leaf" => render.leaf = 0,
-                "render.samples" => render.samples = 0,
-                "render.seed" => render.seed = 0,
-                "render.prss_samples" => render.prss_samples = 0,
-                "render.prss_map" => render.prss_map = PrssMap::default(),
-                "render.prss_fallback" => render.prss_fallback = PrssFallback::default(),
-                "render.prss_curvature" => render.prss_curvature = 0.0,
-                "render.footprint" => render.footprint = FootprintFilter::default(),
-                // A key the list gains must be added here (a test sweeps
-                // every mode).
-                _ => debug_assert!(false, "{key} is not normalised for the fingerprint"),
-            }
+        for (setting, _) in resolve::unread_render_settings(&self.render) {
+            setting.normalise(&mut render);
         }
         let text = format!(
             "{}x{} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {pattern} {:?}",
@@ -1115,7 +1102,7 @@ checker = 8.0
                     let scene = Scene::parse(SCENE, Path::new("t.toml"), &base).unwrap();
                     let unread: Vec<&str> = resolve::unread_render_settings(&scene.render)
                         .into_iter()
-                        .map(|(k, _)| k)
+                        .map(|(setting, _)| setting.key())
                         .collect();
                     let before = print(&base);
                     for other in others {

@@ -146,7 +146,11 @@ pub(super) fn ignored_settings(
             "step traversal samples every point and uses no classification".into(),
         ));
     }
-    unused.extend(unread_render_settings(render));
+    unused.extend(
+        unread_render_settings(render)
+            .into_iter()
+            .map(|(setting, why)| (setting.key(), why)),
+    );
     if !surface.filter.smooths() {
         unused.push((
             "surface.lambda",
@@ -168,17 +172,65 @@ pub(super) fn ignored_settings(
         .collect()
 }
 
+/// A `[render]` setting that some traversals or anti-aliasing modes do not
+/// read: what [`unread_render_settings`] lists.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(super) enum ModeSetting {
+    Step,
+    Leaf,
+    Samples,
+    Seed,
+    PrssSamples,
+    PrssMap,
+    PrssFallback,
+    PrssCurvature,
+    Footprint,
+}
+
+impl ModeSetting {
+    /// The key as scene files and `--set` spell it.
+    pub(super) fn key(self) -> &'static str {
+        match self {
+            Self::Step => "render.step",
+            Self::Leaf => "render.leaf",
+            Self::Samples => "render.samples",
+            Self::Seed => "render.seed",
+            Self::PrssSamples => "render.prss_samples",
+            Self::PrssMap => "render.prss_map",
+            Self::PrssFallback => "render.prss_fallback",
+            Self::PrssCurvature => "render.prss_curvature",
+            Self::Footprint => "render.footprint",
+        }
+    }
+
+    /// Sets it to one fixed value, so that frames that differ only in a
+    /// setting neither reads print alike ([`Scene::frame_fingerprint`]).
+    pub(super) fn normalise(self, r: &mut RenderSettings) {
+        match self {
+            Self::Step => r.step = 0.0,
+            Self::Leaf => r.leaf = 0,
+            Self::Samples => r.samples = 0,
+            Self::Seed => r.seed = 0,
+            Self::PrssSamples => r.prss_samples = 0,
+            Self::PrssMap => r.prss_map = Default::default(),
+            Self::PrssFallback => r.prss_fallback = Default::default(),
+            Self::PrssCurvature => r.prss_curvature = 0.0,
+            Self::Footprint => r.footprint = Default::default(),
+        }
+    }
+}
+
 /// The `[render]` settings the scene's traversal, supersampling and PRSS
 /// fallback do not read, each with why: the one list that the warnings
 /// (`ignored_settings`) and a `--region` part's frame fingerprint
 /// ([`Scene::frame_fingerprint`], which must not tell apart parts that
 /// differ only there) both follow.
-pub(super) fn unread_render_settings(render: &RenderSettings) -> Vec<(&'static str, String)> {
+pub(super) fn unread_render_settings(render: &RenderSettings) -> Vec<(ModeSetting, String)> {
     let mut unread = Vec::new();
     let traversal = setting_name(&render.traversal);
     if render.traversal != Traversal::Step {
         unread.push((
-            "render.step",
+            ModeSetting::Step,
             format!(
                 "it is the step of traversal = \"step\"; the {traversal} traversal finds crossings cell by cell"
             ),
@@ -186,7 +238,7 @@ pub(super) fn unread_render_settings(render: &RenderSettings) -> Vec<(&'static s
     }
     if render.traversal != Traversal::Octree {
         unread.push((
-            "render.leaf",
+            ModeSetting::Leaf,
             format!(
                 "it is the leaf side of traversal = \"octree\"'s descent, which the {traversal} traversal does not make"
             ),
@@ -198,30 +250,31 @@ pub(super) fn unread_render_settings(render: &RenderSettings) -> Vec<(&'static s
 
 /// The anti-aliasing settings the scene's supersampling (and PRSS
 /// fallback) does not read, each with the modes that do.
-fn unread_sampling(render: &RenderSettings) -> Vec<(&'static str, String)> {
+fn unread_sampling(render: &RenderSettings) -> Vec<(ModeSetting, String)> {
     use super::PrssFallback as F;
+    use ModeSetting as M;
     use Supersampling as S;
     let mode = render.supersampling;
     let post = matches!(mode, S::Prss | S::Footprint);
     let retraces = post && matches!(render.prss_fallback, F::Trace | F::BlendTrace);
-    let keys: [(&str, bool, &str); 7] = [
+    let keys: [(ModeSetting, bool, &str); 7] = [
         (
-            "render.samples",
+            M::Samples,
             matches!(mode, S::Grid | S::Jitter) || retraces,
             "grid and jitter, and prss and footprint where prss_fallback re-traces pixels (trace, blend-trace)",
         ),
-        ("render.seed", mode == S::Jitter, "jitter"),
-        ("render.prss_samples", post, "prss and footprint"),
+        (M::Seed, mode == S::Jitter, "jitter"),
+        (M::PrssSamples, post, "prss and footprint"),
         // Footprint mode filters each pixel's own surface by its Jacobian:
         // only PRSS interpolates the hit map.
-        ("render.prss_map", mode == S::Prss, "prss"),
-        ("render.prss_fallback", post, "prss and footprint"),
+        (M::PrssMap, mode == S::Prss, "prss"),
+        (M::PrssFallback, post, "prss and footprint"),
         (
-            "render.prss_curvature",
+            M::PrssCurvature,
             post && render.prss_fallback == F::Trace,
             "prss and footprint with prss_fallback = \"trace\"",
         ),
-        ("render.footprint", mode == S::Footprint, "footprint"),
+        (M::Footprint, mode == S::Footprint, "footprint"),
     ];
     let now = match mode {
         S::None => "render.supersampling is \"none\" (one ray per pixel)".to_string(),
