@@ -33,10 +33,14 @@ pub struct HitComparison {
     pub both_valid: usize,
     /// Pixels that reach the backdrop in exactly one.
     pub validity_mismatch: usize,
-    /// Pixels whose event counts differ.
+    /// Pixels whose event counts differ (where both images record them).
     pub event_mismatch: usize,
-    /// Share of pixels with equal event counts.
+    /// Share of pixels with equal event counts, of those where both images
+    /// record them.
     pub events_equal_fraction: f64,
+    /// Pixels where either image records no event count (NaN: POV-Ray's
+    /// hits, `export-pov --run`, do not count interfaces).
+    pub events_unknown: usize,
     /// Percentiles of the hit distance over pixels valid in both (backdrop units).
     pub p50: f64,
     pub p90: f64,
@@ -76,8 +80,12 @@ impl HitComparison {
         } else {
             "units"
         };
+        let unknown = match self.events_unknown {
+            0 => String::new(),
+            n => format!(" of {} where both count them", self.pixels - n),
+        };
         let mut s = format!(
-            "{} pixels: {} reach the backdrop in both, {} in only one, {} with different event counts ({:.3}% equal)\n",
+            "{} pixels: {} reach the backdrop in both, {} in only one, {} with different event counts ({:.3}% equal{unknown})\n",
             self.pixels,
             self.both_valid,
             self.validity_mismatch,
@@ -107,6 +115,11 @@ impl HitComparison {
         }
         s
     }
+}
+
+/// Whether two pixels' event counts differ: both known (not NaN) and unequal.
+fn events_differ(a: f32, b: f32) -> bool {
+    !a.is_nan() && !b.is_nan() && a != b
 }
 
 /// Percentile by nearest rank of sorted values (NaN-free).
@@ -163,13 +176,19 @@ pub fn disagreements(
     };
     let n = a.u.len();
     let mut out: Vec<Disagreement> = (0..n)
-        .filter(|&i| a.events[i] != b.events[i] || hit(a, i).is_some() != hit(b, i).is_some())
+        .filter(|&i| {
+            events_differ(a.events[i], b.events[i]) || hit(a, i).is_some() != hit(b, i).is_some()
+        })
         .take(limit)
         .map(row)
         .collect();
     if out.len() < limit {
         let mut rest: Vec<Disagreement> = (0..n)
-            .filter(|&i| a.events[i] == b.events[i] && hit(a, i).is_some() && hit(b, i).is_some())
+            .filter(|&i| {
+                !events_differ(a.events[i], b.events[i])
+                    && hit(a, i).is_some()
+                    && hit(b, i).is_some()
+            })
             .map(row)
             .filter(|d| d.distance.is_some_and(|v| v > 0.0))
             .collect();
@@ -194,11 +213,13 @@ pub fn compare_hits(
     let n = a.u.len();
     let mut d = Vec::with_capacity(n);
     let mut dr = Vec::new();
-    let (mut validity, mut events) = (0, 0);
+    let (mut validity, mut events, mut unknown) = (0, 0, 0);
     for i in 0..n {
         let va = a.u[i].is_finite() && a.v[i].is_finite();
         let vb = b.u[i].is_finite() && b.v[i].is_finite();
-        if a.events[i] != b.events[i] {
+        if a.events[i].is_nan() || b.events[i].is_nan() {
+            unknown += 1;
+        } else if a.events[i] != b.events[i] {
             events += 1;
         }
         match (va, vb) {
@@ -227,7 +248,8 @@ pub fn compare_hits(
         both_valid: d.len(),
         validity_mismatch: validity,
         event_mismatch: events,
-        events_equal_fraction: 1.0 - events as f64 / n.max(1) as f64,
+        events_equal_fraction: 1.0 - events as f64 / (n - unknown).max(1) as f64,
+        events_unknown: unknown,
         p50: percentile(&d, 50.0),
         p90: percentile(&d, 90.0),
         p99: percentile(&d, 99.0),
@@ -246,6 +268,32 @@ pub fn compare_hits(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Hits without event counts (POV-Ray's) are compared by position
+    /// only: their NaN counts are neither mismatches nor disagreements.
+    #[test]
+    fn unknown_event_counts_are_not_mismatches() {
+        let a = HitImage {
+            width: 3,
+            height: 1,
+            u: vec![0.0, 1.0, 2.0],
+            v: vec![0.0; 3],
+            events: vec![2.0, 0.0, 4.0],
+        };
+        let mut b = a.clone();
+        b.events = vec![f32::NAN, f32::NAN, 3.0];
+        b.u[1] = 1.5;
+        let c = compare_hits(&a, &b, None).unwrap();
+        assert_eq!((c.event_mismatch, c.events_unknown), (1, 2));
+        assert_eq!(c.events_equal_fraction, 0.0);
+        assert!(
+            c.table().contains(
+                "1 with different event counts (0.000% equal of 1 where both count them)"
+            )
+        );
+        let d = disagreements(&a, &b, 10).unwrap();
+        assert_eq!(d.iter().map(|d| d.x).collect::<Vec<_>>(), vec![2, 1]);
+    }
 
     #[test]
     fn statistics() {

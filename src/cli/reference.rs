@@ -57,6 +57,24 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             spec.noise
         );
     }
+    // The analytic spheres take one ray per pixel centre: what a `--set`
+    // asks of the filter or the renderer's settings does not apply.
+    let unread: Vec<&str> = a
+        .set
+        .iter()
+        .map(|s| s.split('=').next().unwrap_or("").trim())
+        .filter(|k| {
+            (k.starts_with("render.") && *k != "render.max_events")
+                || *k == "surface.filter"
+                || *k == "surface.lambda"
+        })
+        .collect();
+    if !unread.is_empty() {
+        eprintln!(
+            "warning: --set {} ignored: the reference traces the phantom's analytic spheres, one ray per pixel centre (of the [render] settings it reads only max_events)",
+            unread.join(", ")
+        );
+    }
     let hits = r.render(&scene);
     // The hits and the image appear together, or neither does.
     let held = snell::atomic::hold();

@@ -178,6 +178,17 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     for w in &prep.volume.warnings {
         eprintln!("warning: {w}");
     }
+    let d = prep.volume.dims();
+    if let Some(axis) = (0..3).find(|&i| d[i] < 2) {
+        eprintln!(
+            "warning: {}: the volume is {}x{}x{} samples: one sample along {} makes no cells, so no surface; the image shows only the backdrop",
+            a.scene.display(),
+            d[0],
+            d[1],
+            d[2],
+            ["x", "y", "z"][axis]
+        );
+    }
     let (lo, hi) = prep.volume.value_range();
     let iso = scene.surface.iso;
     if !(iso >= lo as f64 && iso <= hi as f64) {
@@ -192,8 +203,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             )
         };
         eprintln!(
-            "warning: {}: iso-value {iso} is outside the data range [{lo}, {hi}]; {shows}",
-            a.scene.display()
+            "warning: {}: iso-value {} is outside the data range [{}, {}]; {shows}",
+            a.scene.display(),
+            snell::human::exact(iso),
+            snell::human::num(lo as f64),
+            snell::human::num(hi as f64)
         );
     }
     let renderer = Renderer {

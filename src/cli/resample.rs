@@ -62,6 +62,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         SampleType::F64 => SampleType::F32,
         t => t,
     });
+    let (lo, hi) = vol.value_range();
+    if let Some((tlo, thi)) = snell::filter::resample::integer_range(ty)
+        && ((lo as f64) < tlo || (hi as f64) > thi)
+    {
+        eprintln!(
+            "warning: {}: values [{lo}, {hi}] do not fit {} [{tlo}, {thi}]: those beyond are clamped",
+            a.volume.display(),
+            ty.name()
+        );
+    }
     let start = Instant::now();
     let resampling = Step::named(format!(
         "resampling to {}x{}x{} with {kind}",

@@ -95,16 +95,23 @@ fn peak_bytes(n: [usize; 3], padded: [usize; 3], m: [usize; 3], support: usize) 
 /// The value stored for a sample of type `ty`: integers rounded and clamped
 /// to the type's range (interpolating filters overshoot near edges).
 fn store(ty: SampleType, v: f64) -> f32 {
-    let (lo, hi) = match ty {
+    match integer_range(ty) {
+        Some((lo, hi)) => v.round().clamp(lo, hi) as f32,
+        None => v as f32,
+    }
+}
+
+/// The values an integer sample type holds (`None` for floats).
+pub fn integer_range(ty: SampleType) -> Option<(f64, f64)> {
+    Some(match ty {
         SampleType::I8 => (i8::MIN as f64, i8::MAX as f64),
         SampleType::U8 => (0.0, u8::MAX as f64),
         SampleType::I16 => (i16::MIN as f64, i16::MAX as f64),
         SampleType::U16 => (0.0, u16::MAX as f64),
         SampleType::I32 => (i32::MIN as f64, i32::MAX as f64),
         SampleType::U32 => (0.0, u32::MAX as f64),
-        SampleType::F32 | SampleType::F64 => return v as f32,
-    };
-    v.round().clamp(lo, hi) as f32
+        SampleType::F32 | SampleType::F64 => return None,
+    })
 }
 
 /// `vol` reconstructed with `kind` and sampled on a `dims` lattice over the

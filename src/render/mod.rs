@@ -191,6 +191,7 @@ fn render_field<T: Coefficient>(
         threads: rayon::current_num_threads(),
         width: scene.width,
         height: scene.height,
+        region: window.map(|w| [w.x0, w.y0, w.x1, w.y1]),
         prepare: prep.times,
         ..Default::default()
     };

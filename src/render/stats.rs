@@ -150,6 +150,9 @@ pub struct RenderStats {
     pub threads: usize,
     pub width: u32,
     pub height: u32,
+    /// The part of the `width × height` frame rendered (`render --region`):
+    /// `[x0, y0, x1, y1]`, exclusive ends; `None` for the whole frame.
+    pub region: Option<[u32; 4]>,
     /// What the anti-aliasing stage did (PRSS, footprint).
     pub post: Option<crate::film::prss::PostStats>,
     /// Rays traced in the adaptive second pass (PRSS fallback `trace`).
@@ -180,6 +183,7 @@ impl RenderStats {
         serde_json::json!({
             "width": self.width,
             "height": self.height,
+            "region": self.region,
             "threads": self.threads,
             "wall_s": self.wall.as_secs_f64(),
             "rays_per_s": c.rays as f64 / self.wall.as_secs_f64().max(1e-12),
@@ -204,10 +208,18 @@ impl RenderStats {
         let rays = c.rays.max(1) as f64;
         let total = self.stage_times.total().as_secs_f64().max(1e-12);
         let mut s = String::new();
+        let size = match self.region {
+            None => format!("{}x{}", self.width, self.height),
+            Some([x0, y0, x1, y1]) => format!(
+                "{}x{} region {x0},{y0},{x1},{y1} of {}x{}",
+                x1 - x0,
+                y1 - y0,
+                self.width,
+                self.height
+            ),
+        };
         s.push_str(&format!(
-            "{}x{} in {:.1} ms wall ({} threads), {:.2} Mrays/s\n",
-            self.width,
-            self.height,
+            "{size} in {:.1} ms wall ({} threads), {:.2} Mrays/s\n",
             self.wall.as_secs_f64() * 1e3,
             self.threads,
             c.rays as f64 / self.wall.as_secs_f64().max(1e-12) / 1e6

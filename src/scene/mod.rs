@@ -433,10 +433,14 @@ impl Scene {
         let hb = crate::volume::limits::human_bytes;
         Err(SceneError::Key {
             path: self.path.clone(),
-            key: if scratch > frame {
+            // The tiles' scratch grows with the rays a pixel takes and the
+            // tile's size: the setting to lower is the one that made it.
+            key: if scratch <= frame {
+                "image"
+            } else if self.rays_per_pixel() > 1 {
                 "render.samples"
             } else {
-                "image"
+                "render.tile"
             }
             .into(),
             msg: format!(
