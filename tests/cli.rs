@@ -1745,14 +1745,23 @@ fn an_interrupted_render_leaves_no_debris() {
         let mut attempts = 0;
         let o = loop {
             attempts += 1;
-            let mut child = t
-                .cmd(
-                    "render {sphere} -o o.png --hits h.exr --exr c.exr \
-                     --set image.width=2048 --set image.height=2048 -q",
-                )
-                .stderr(std::process::Stdio::piped())
-                .spawn()
-                .unwrap();
+            let mut cmd = t.cmd(
+                "render {sphere} -o o.png --hits h.exr --exr c.exr \
+                 --set image.width=2048 --set image.height=2048 -q",
+            );
+            // A test run started in the background of a shell ignores
+            // SIGINT, and so would the render (as it should): the child
+            // starts with the default disposition, as from a terminal.
+            // SAFETY: `signal` is async-signal-safe; nothing else runs
+            // between fork and exec.
+            unsafe {
+                use std::os::unix::process::CommandExt;
+                cmd.pre_exec(|| {
+                    libc::signal(libc::SIGINT, libc::SIG_DFL);
+                    Ok(())
+                });
+            }
+            let mut child = cmd.stderr(std::process::Stdio::piped()).spawn().unwrap();
             // Waits for the first temporary output file, then interrupts.
             let start = std::time::Instant::now();
             let mut writing = false;
@@ -1785,7 +1794,13 @@ fn an_interrupted_render_leaves_no_debris() {
             }
             break o;
         };
-        assert_eq!(o.status.signal(), Some(signal), "{}", stderr(&o));
+        assert_eq!(
+            o.status.signal(),
+            Some(signal),
+            "{}: {}",
+            o.status,
+            stderr(&o)
+        );
         assert!(stderr(&o).contains("interrupted"), "{}", stderr(&o));
         let left: Vec<PathBuf> = listing(&t.0).into_iter().map(|(p, _)| p).collect();
         assert!(left.is_empty(), "{left:?}");

@@ -919,6 +919,14 @@ checker = 8.0
             "--set surface=3: expected a table of surface settings, got 3"
         );
         assert_eq!(
+            set("camera.kind=3"),
+            "--set camera.kind=3: expected the name of a choice, in quotes"
+        );
+        assert_eq!(
+            set("camera.position=[1,2,3,4]"),
+            "--set camera.position=[1,2,3,4]: too many values in the array (4)"
+        );
+        assert_eq!(
             file("size = 32", "size = -64"),
             "test.toml: [volume.phantom.size] expected a whole number from 1 to 4096, got -64"
         );

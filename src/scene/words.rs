@@ -85,6 +85,12 @@ pub(super) fn plain_serde_message(msg: &str, whole: Option<(u32, u32)>) -> Strin
             }
         }
     };
+    // A named choice (`kind`, `traversal`, …) given as a number or a
+    // boolean: TOML's words ("unit variant, expected string only") name
+    // neither.
+    if msg.ends_with("expected string only") {
+        return "expected the name of a choice, in quotes".into();
+    }
     for prefix in ["invalid type: ", "invalid value: "] {
         if let Some(rest) = msg.strip_prefix(prefix)
             && let Some((u, e)) = rest.rsplit_once(", expected ")
@@ -95,6 +101,10 @@ pub(super) fn plain_serde_message(msg: &str, whole: Option<(u32, u32)>) -> Strin
     if let Some(rest) = msg.strip_prefix("invalid length ")
         && let Some((n, e)) = rest.split_once(", expected ")
     {
+        // TOML's words for an array longer than the setting's.
+        if e.trim() == "fewer elements in array" {
+            return format!("too many values in the array ({n})");
+        }
         return format!("expected {}, got {n}", expected(e));
     }
     if let Some(rest) = msg.strip_prefix("missing field ") {
