@@ -432,6 +432,15 @@ fn nrrd_ascii_values() {
     assert!(e.to_string().contains("'3.5'"), "{e}");
     let e = read("nan.nrrd", "double", "1 2 nan 4").unwrap_err();
     assert!(matches!(e, VolumeError::NonFinite { nan: 1, .. }), "{e}");
+    // A finite number beyond f32 is not an infinity the file holds.
+    let e = read("big.nrrd", "float", "1 1e50 3 4").unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("ascii value 1 ('1e50') is beyond f32's range"),
+        "{e}"
+    );
+    let e = read("inf.nrrd", "float", "1 -inf 3 4").unwrap_err();
+    assert!(matches!(e, VolumeError::NonFinite { inf: 1, .. }), "{e}");
 }
 
 /// Data split over files, one slab each (teem's `data file` pattern and

@@ -117,7 +117,8 @@ pub(super) fn drain(
             Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => {
                 return Err(VolumeError::format(
                     path,
-                    "gzip data ends before its trailer: the file is truncated",
+                    // A damaged byte near the end can read as an early end too.
+                    "gzip data ends before its trailer: the file is truncated or damaged",
                 ));
             }
             Err(e) => return Err(gzip_error(path, e)),

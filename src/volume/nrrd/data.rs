@@ -138,8 +138,20 @@ pub(super) fn ascii_region(
             SampleType::U16 => parse!(u16),
             SampleType::I32 => parse!(i32),
             SampleType::U32 => parse!(u32),
-            // Rounded once, from the decimal text.
-            SampleType::F32 => parse!(f32),
+            // Rounded once, from the decimal text; a finite number beyond
+            // f32 (which parses as an infinity) is refused as such, as the
+            // binary encodings' are, not called infinite.
+            SampleType::F32 => {
+                let v = t.parse::<f32>().map_err(|_| bad())?;
+                let literal = t.trim_start_matches(['+', '-']).to_ascii_lowercase();
+                if v.is_infinite() && !literal.starts_with("inf") {
+                    return Err(fmt(format!(
+                        "ascii value {i} ('{}') is beyond f32's range (±3.4e38)",
+                        excerpt(t)
+                    )));
+                }
+                slot.copy_from_slice(&v.to_le_bytes())
+            }
             SampleType::F64 => {
                 slot.copy_from_slice(&t.parse::<f64>().map_err(|_| bad())?.to_le_bytes())
             }
