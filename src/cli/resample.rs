@@ -66,10 +66,15 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let Some((tlo, thi)) = snell::filter::resample::integer_range(ty)
         && ((lo as f64) < tlo || (hi as f64) > thi)
     {
+        let num = snell::human::num;
         eprintln!(
-            "warning: {}: values [{lo}, {hi}] do not fit {} [{tlo}, {thi}]: those beyond are clamped",
+            "warning: {}: values [{}, {}] do not fit {} [{}, {}]: those beyond are clamped",
             a.volume.display(),
-            ty.name()
+            num(lo as f64),
+            num(hi as f64),
+            ty.name(),
+            num(tlo),
+            num(thi)
         );
     }
     let start = Instant::now();
