@@ -12,8 +12,9 @@
 //! size. Every level fuses its multiply-adds ([`Fused`]; the portable one
 //! with the scalar FMA instruction where the CPU has it, else the C
 //! library's `fma`, see [`portable_run`]) and the vector kernels' sums keep
-//! one order, so the levels, and machines of different instruction sets,
-//! give the same bits.
+//! one order, so the three levels give the same bits (compared on one
+//! x86-64 machine through `SNELL_ISA`; other architectures run the portable
+//! level's code, not compared).
 
 use std::sync::OnceLock;
 
@@ -217,9 +218,10 @@ macro_rules! with_isa {
 /// instruction where the CPU has it: every level's multiply-adds are fused
 /// ([`Fused`]), so that all give the same bits. Without the instruction
 /// each `mul_add` is a call into the C library's correctly rounded `fma`:
-/// the same bits, at a cost (portable sphere and teapot frames 3.5–4× slower
-/// on this project's CPU with every `mul_add` such a call, where the library
-/// still uses the instruction; more where it computes `fma` in software).
+/// the same bits, at a cost (portable sphere and teapot frames 3.6–4.5×
+/// slower on this project's CPU with every `mul_add` such a call, where the
+/// library still uses the instruction; more where it computes `fma` in
+/// software).
 #[inline(always)]
 pub fn portable_run<R>(f: impl FnOnce() -> R) -> R {
     #[cfg(target_arch = "x86_64")]

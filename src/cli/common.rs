@@ -400,6 +400,19 @@ pub fn check_distinct(outputs: &[&Path], inputs: &[&Path]) -> anyhow::Result<()>
 
 /// A size in MiB (as [`snell::bench::machine::peak_rss_mib`] reports the
 /// process's peak) as `1.5 GiB`.
+/// `AxBxC samples: one sample along z makes no cells` for a volume one
+/// sample thick along an axis (no cell, so no surface), else `None`.
+pub fn no_cells(d: [usize; 3]) -> Option<String> {
+    let axis = (0..3).find(|&i| d[i] < 2)?;
+    Some(format!(
+        "{}x{}x{} samples: one sample along {} makes no cells",
+        d[0],
+        d[1],
+        d[2],
+        ["x", "y", "z"][axis]
+    ))
+}
+
 pub fn human_mib(mib: f64) -> String {
     limits::human_bytes((mib * 1048576.0) as u64)
 }

@@ -178,15 +178,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     for w in &prep.volume.warnings {
         eprintln!("warning: {w}");
     }
-    let d = prep.volume.dims();
-    if let Some(axis) = (0..3).find(|&i| d[i] < 2) {
+    if let Some(why) = super::common::no_cells(prep.volume.dims()) {
         eprintln!(
-            "warning: {}: the volume is {}x{}x{} samples: one sample along {} makes no cells, so no surface; the image shows only the backdrop",
-            a.scene.display(),
-            d[0],
-            d[1],
-            d[2],
-            ["x", "y", "z"][axis]
+            "warning: {}: the volume is {why}, so no surface; the image shows only the backdrop",
+            a.scene.display()
         );
     }
     let (lo, hi) = prep.volume.value_range();

@@ -132,15 +132,10 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     // The scene reader's own check of a spacing (here one --spacing set).
     snell::volume::check_spacing_ratio(vol.spacing())
         .with_context(|| a.volume.display().to_string())?;
-    let d = vol.dims();
-    if let Some(axis) = (0..3).find(|&i| d[i] < 2) {
+    if let Some(why) = super::common::no_cells(vol.dims()) {
         bail!(
-            "{}: {}x{}x{} samples: one sample along {} makes no cells there, so no surface to frame",
-            a.volume.display(),
-            d[0],
-            d[1],
-            d[2],
-            ["x", "y", "z"][axis]
+            "{}: {why} there, so no surface to frame",
+            a.volume.display()
         );
     }
     let stats = vol.stats();

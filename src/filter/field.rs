@@ -345,11 +345,12 @@ impl<T: Coefficient> Field<T> {
         self.value_grad_in::<S>(p)
     }
 
-    /// [`Field::cubic_value_grad_in`] without vector instructions, bitwise its
-    /// result ([`crate::simd::cubic_value_grad_scalar`]): the instruction
-    /// set does not change a cubic filter's normals.
+    /// A cubic kernel's neighbourhood of `p` (rows and their strides) and
+    /// its weights and derivative weights per axis: what both cubic kernels
+    /// contract.
     #[inline(always)]
-    fn cubic_value_grad_portable(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+    #[allow(clippy::type_complexity)]
+    fn cubic_support(&self, p: [f64; 3]) -> (&[T], usize, usize, [[f64; 4]; 3], [[f64; 4]; 3]) {
         let mut w = [[0.0; 4]; 3];
         let mut d = [[0.0; 4]; 3];
         let mut k = [0isize; 3];
@@ -359,6 +360,15 @@ impl<T: Coefficient> Field<T> {
             (w[a], d[a]) = self.kernel.weights_and_derivs::<4>(t);
         }
         let (nb, sy, sz) = self.neighbourhood::<4>(self.coeffs.offset(k[0], k[1], k[2]));
+        (nb, sy, sz, w, d)
+    }
+
+    /// [`Field::cubic_value_grad_in`] without vector instructions, bitwise its
+    /// result ([`crate::simd::cubic_value_grad_scalar`]): the instruction
+    /// set does not change a cubic filter's normals.
+    #[inline(always)]
+    fn cubic_value_grad_portable(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
+        let (nb, sy, sz, w, d) = self.cubic_support(p);
         crate::simd::cubic_value_grad_scalar(nb, sy, sz, &w, &d)
     }
 
@@ -440,15 +450,7 @@ impl<T: Coefficient> Field<T> {
     #[target_feature(enable = "avx2,fma,f16c")]
     #[inline]
     pub unsafe fn cubic_value_grad_in(&self, p: [f64; 3]) -> (f64, [f64; 3]) {
-        let mut w = [[0.0; 4]; 3];
-        let mut d = [[0.0; 4]; 3];
-        let mut k = [0isize; 3];
-        for a in 0..3 {
-            let (ka, t) = self.kernel.locate(p[a]);
-            k[a] = ka;
-            (w[a], d[a]) = self.kernel.weights_and_derivs::<4>(t);
-        }
-        let (nb, sy, sz) = self.neighbourhood::<4>(self.coeffs.offset(k[0], k[1], k[2]));
+        let (nb, sy, sz, w, d) = self.cubic_support(p);
         // SAFETY: a `neighbourhood` holds every row; AVX2/FMA/F16C per caller.
         unsafe { crate::simd::cubic_value_grad(nb, sy, sz, &w, &d) }
     }
