@@ -199,8 +199,44 @@ pub fn check_target(path: &Path) -> io::Result<()> {
             io::ErrorKind::InvalidInput,
             "is not a regular file (a device, FIFO or socket)",
         )),
+        Err(e) if is_link_loop(&e) => Err(io::Error::new(
+            io::ErrorKind::InvalidInput,
+            "is a loop of symbolic links",
+        )),
+        Ok(_) if !may_write(path) => Err(io::Error::new(
+            io::ErrorKind::PermissionDenied,
+            "is read-only: its permissions refuse writing it (as a shell's `>` would be refused)",
+        )),
         _ => Ok(()),
     }
+}
+
+/// Whether this process may write the existing file `path`: the rename
+/// would replace a file whose mode forbids writing it, which is the
+/// file's owner saying not to (root may write anything, as with `>`).
+#[cfg(unix)]
+fn may_write(path: &Path) -> bool {
+    use std::os::unix::ffi::OsStrExt;
+    let Ok(c) = std::ffi::CString::new(path.as_os_str().as_bytes()) else {
+        return true;
+    };
+    // SAFETY: `c` is a valid NUL-terminated string for the call's duration.
+    unsafe { libc::access(c.as_ptr(), libc::W_OK) == 0 }
+}
+
+#[cfg(not(unix))]
+fn may_write(path: &Path) -> bool {
+    fs::metadata(path).is_ok_and(|m| !m.permissions().readonly())
+}
+
+#[cfg(unix)]
+fn is_link_loop(e: &io::Error) -> bool {
+    e.raw_os_error() == Some(libc::ELOOP)
+}
+
+#[cfg(not(unix))]
+fn is_link_loop(_: &io::Error) -> bool {
+    false
 }
 
 /// Creates and removes a temporary file where [`write_atomic`] will write
@@ -229,15 +265,31 @@ fn begin_temp(tmp: &Path) -> io::Result<File> {
 }
 
 /// The file a write of `path` replaces: through a symbolic link to the
-/// file it names, as other tools write, rather than replacing the link (a
-/// dangling link is replaced by the file).
+/// file it names, as other tools write, rather than replacing the link. A
+/// dangling link is followed to the file it names, which the write creates
+/// (as a shell's `>` does); a loop of links is left as it is, for
+/// [`check_target`] to refuse.
 pub fn written_path(path: &Path) -> PathBuf {
-    match fs::symlink_metadata(path) {
-        Ok(m) if m.file_type().is_symlink() => {
-            fs::canonicalize(path).unwrap_or_else(|_| path.to_path_buf())
+    let mut at = path.to_path_buf();
+    // Linux's own limit on links followed in one lookup.
+    for _ in 0..40 {
+        match fs::symlink_metadata(&at) {
+            Ok(m) if m.file_type().is_symlink() => {
+                if let Ok(real) = fs::canonicalize(&at) {
+                    return real;
+                }
+                let Ok(next) = fs::read_link(&at) else {
+                    return at;
+                };
+                at = match at.parent() {
+                    Some(dir) if next.is_relative() => dir.join(next),
+                    _ => next,
+                };
+            }
+            _ => return at,
         }
-        _ => path.to_path_buf(),
     }
+    path.to_path_buf()
 }
 
 /// Writes `path` through `write`, atomically.
@@ -293,6 +345,57 @@ mod tests {
         assert!(err.is_err());
         assert_eq!(fs::read(&target).unwrap(), b"ok", "old file untouched");
         assert_eq!(fs::read_dir(&dir).unwrap().count(), 1, "no temp file left");
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A write through a symbolic link replaces the file it names and keeps
+    /// the link; a dangling link's file is created, as a shell's `>` does.
+    #[cfg(unix)]
+    #[test]
+    fn symbolic_links_are_written_through() {
+        let dir = std::env::temp_dir().join(format!("snell-links-{}", std::process::id()));
+        fs::create_dir_all(dir.join("real")).unwrap();
+        std::os::unix::fs::symlink("real/a.bin", dir.join("a.bin")).unwrap();
+        std::os::unix::fs::symlink("b.bin", dir.join("real/b-link.bin")).unwrap();
+        std::os::unix::fs::symlink("real/b-link.bin", dir.join("b.bin")).unwrap();
+        for (link, file) in [("a.bin", "real/a.bin"), ("b.bin", "real/b.bin")] {
+            write_atomic(&dir.join(link), |w| w.write_all(link.as_bytes())).unwrap();
+            assert_eq!(fs::read(dir.join(file)).unwrap(), link.as_bytes());
+            let m = fs::symlink_metadata(dir.join(link)).unwrap();
+            assert!(m.file_type().is_symlink(), "{link} is still a link");
+        }
+        // A loop is refused, not followed forever nor replaced.
+        std::os::unix::fs::symlink("loop2", dir.join("loop1")).unwrap();
+        std::os::unix::fs::symlink("loop1", dir.join("loop2")).unwrap();
+        assert_eq!(written_path(&dir.join("loop1")), dir.join("loop1"));
+        let err = write_atomic(&dir.join("loop1"), |w| w.write_all(b"x")).unwrap_err();
+        assert!(err.to_string().contains("loop"), "{err}");
+        assert!(fs::symlink_metadata(dir.join("loop1")).unwrap().file_type().is_symlink());
+        fs::remove_dir_all(&dir).unwrap();
+    }
+
+    /// A file whose mode forbids writing it is not replaced (unless the
+    /// process may write anything, as root may).
+    #[cfg(unix)]
+    #[test]
+    fn read_only_files_are_not_replaced() {
+        use std::os::unix::fs::PermissionsExt;
+        let dir = std::env::temp_dir().join(format!("snell-ro-{}", std::process::id()));
+        fs::create_dir_all(&dir).unwrap();
+        let target = dir.join("keep.png");
+        fs::write(&target, b"old").unwrap();
+        fs::set_permissions(&target, fs::Permissions::from_mode(0o444)).unwrap();
+        let result = write_atomic(&target, |w| w.write_all(b"new"));
+        // SAFETY: geteuid has no preconditions.
+        if unsafe { libc::geteuid() } == 0 {
+            result.unwrap();
+            assert_eq!(fs::read(&target).unwrap(), b"new");
+        } else {
+            let err = result.unwrap_err();
+            assert!(err.to_string().contains("read-only"), "{err}");
+            assert_eq!(fs::read(&target).unwrap(), b"old");
+        }
+        assert_eq!(fs::read_dir(&dir).unwrap().count(), 1, "no temporary file left");
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -1529,6 +1529,13 @@ fn region_parts_merge_to_the_whole_frame() {
                 bits(&merged) == bits(&format!("{whole}-{kind}.exr")),
                 "{sets}: merged {kind} differ from the whole frame"
             );
+            // The file itself, header included: a merged frame is a whole
+            // frame, without the parts' fingerprint.
+            let bytes = |n: &str| std::fs::read(t.path(n)).unwrap();
+            assert!(
+                bytes(&merged) == bytes(&format!("{whole}-{kind}.exr")),
+                "{sets}: merged {kind} file differs from the whole frame's"
+            );
         }
         let png = |n: &str| image::open(t.path(n)).unwrap().to_rgb8().into_raw();
         assert!(png(&format!("merged{m}.png")) == png(&format!("{whole}.png")));

@@ -312,6 +312,20 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
     if path.is_dir() {
         bail!("{}: is a directory", path.display());
     }
+    // A symbolic link is written through, a dangling one to the file it
+    // names: that file's folder must exist too.
+    let written = snell::atomic::written_path(path);
+    if written != path {
+        if let Some(d) = written.parent().filter(|d| !d.as_os_str().is_empty()) {
+            if !d.is_dir() {
+                bail!(
+                    "{}: a symbolic link to {}, whose directory does not exist",
+                    path.display(),
+                    written.display()
+                );
+            }
+        }
+    }
     snell::atomic::check_target(path)
         .map_err(|e| anyhow::anyhow!("{}: {e}; outputs go to files", path.display()))?;
     snell::atomic::check_writable(path).map_err(|e| {
@@ -361,8 +375,10 @@ pub fn given<'a>(paths: &[Option<&'a PathBuf>]) -> Vec<&'a Path> {
 /// write would silently replace the earlier output, or the input itself.
 pub fn check_distinct(outputs: &[&Path], inputs: &[&Path]) -> anyhow::Result<()> {
     // The file a path names: resolved where it exists, else its directory
-    // resolved and its name appended.
+    // resolved and its name appended (a dangling link's file, which the
+    // write would create).
     let identity = |p: &Path| -> PathBuf {
+        let p = &snell::atomic::written_path(p);
         std::fs::canonicalize(p).unwrap_or_else(|_| {
             let dir = match p.parent() {
                 Some(d) if !d.as_os_str().is_empty() => d,

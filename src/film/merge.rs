@@ -26,8 +26,6 @@ pub struct Merged {
     pub width: u32,
     pub height: u32,
     pub channels: Vec<(String, Vec<f32>)>,
-    /// The parts' frame ([`Placement::frame`]), kept in the merged EXR.
-    pub frame: Option<u64>,
 }
 
 #[derive(Debug, thiserror::Error)]
@@ -244,17 +242,19 @@ pub fn merge(parts: &[Part], memory_limit: u64) -> Result<Merged, MergeError> {
         width,
         height,
         channels,
-        frame: first.at.frame,
     })
 }
 
 impl Merged {
-    /// The whole image as one EXR with the parts' channels.
+    /// The whole image as one EXR with the parts' channels. Without the
+    /// parts' frame fingerprint: it is a whole frame, written as `render`
+    /// writes one, so the merge of all parts is byte for byte the file a
+    /// render of the whole frame writes.
     pub fn write_exr(&self, path: &Path) -> Result<(), FilmError> {
         let whole = Placement {
             origin: [0, 0],
             full: [self.width, self.height],
-            frame: self.frame,
+            frame: None,
         };
         let channels = self
             .channels

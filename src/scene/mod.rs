@@ -172,7 +172,9 @@ impl Scene {
     /// `checker_colors` with a photograph, `render.step` with a cell
     /// traversal, the anti-aliasing settings with `supersampling = "none"`
     /// (and `footprint` without the footprint mode), and `surface.lambda`
-    /// with a filter that does not smooth.
+    /// with a filter that does not smooth; and one setting used otherwise
+    /// than written: a `backdrop.u_axis` out of the backdrop's plane, whose
+    /// projection onto it is used.
     pub fn ignored_settings(&self) -> &[String] {
         &self.ignored
     }
@@ -1072,6 +1074,16 @@ checker = 8.0
             s.ignored_settings().is_empty(),
             "{:?}",
             s.ignored_settings()
+        );
+        // A u axis out of the plane is projected, and said to be; its
+        // length and a rounding error's tilt are not worth a word.
+        let s = parse(&["backdrop.u_axis=[2.0, 0.0, 1e-9]"]).unwrap();
+        assert!(s.ignored_settings().is_empty(), "{:?}", s.ignored_settings());
+        assert_eq!(s.backdrop.u_axis, DVec3::X);
+        let s = parse(&["backdrop.u_axis=[1.0, 0.0, 1.0]"]).unwrap();
+        assert_eq!(
+            s.ignored_settings(),
+            ["--set backdrop.u_axis=[1.0, 0.0, 1.0] is not in the backdrop's plane (45.000° out of it): its projection onto the plane, [1, 0, 0], is the u axis"]
         );
     }
 

@@ -172,6 +172,37 @@ pub(super) fn ignored_settings(
         .collect()
 }
 
+/// A note when the written `backdrop.u_axis` leaves the backdrop's plane
+/// by more than a rounding error: the scene uses its projection onto the
+/// plane (so that SPEC's `v = cross(normal, u)` is a unit vector in it),
+/// which the user should know is not the direction written. Its length
+/// never matters: only directions are read.
+fn tilted_u_axis(
+    written: &[(String, String)],
+    u_raw: DVec3,
+    normal: DVec3,
+    u_axis: DVec3,
+) -> Option<String> {
+    let (_, value) = written.iter().find(|(k, _)| k == "backdrop.u_axis")?;
+    // The sine of the angle between the axis written and the plane.
+    let off = u_raw.dot(normal).abs() / u_raw.length();
+    if off <= 1e-6 {
+        return None;
+    }
+    let shown = match value.strip_prefix("--set ") {
+        Some(_) => value.clone(),
+        None => format!("[backdrop.u_axis] = {value}"),
+    };
+    Some(format!(
+        "{shown} is not in the backdrop's plane ({:.3}° out of it): its projection onto the plane, {}, is the u axis",
+        off.min(1.0).asin().to_degrees(),
+        {
+            let [x, y, z] = u_axis.to_array().map(crate::human::num);
+            format!("[{x}, {y}, {z}]")
+        }
+    ))
+}
+
 /// A `[render]` setting that some traversals or anti-aliasing modes do not
 /// read: what [`unread_render_settings`] lists.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -700,7 +731,8 @@ pub(super) fn resolve(
         skip_clear_segments: r.skip_clear_segments,
     };
 
-    let ignored = ignored_settings(written, &f, &surface, &render);
+    let mut ignored = ignored_settings(written, &f, &surface, &render);
+    ignored.extend(tilted_u_axis(written, u_raw, backdrop.normal, backdrop.u_axis));
     let scene = Scene {
         ignored,
         overrides: Vec::new(),
