@@ -146,7 +146,10 @@ impl Reference {
                     best = Some((t, k));
                 }
             }
-            let Some((t, k)) = best else {
+            // The backdrop is opaque: met before the next sphere, or with
+            // none ahead, it ends the ray.
+            let plane = scene.backdrop.plane_t(o, d);
+            let Some((t, k)) = best.filter(|&(t, _)| plane.is_none_or(|tp| t < tp)) else {
                 return (scene.backdrop.hit(o, d), events);
             };
             let p = o + t * d;

@@ -265,10 +265,36 @@ fn cases() -> Vec<Case> {
                 let d = events_differ(&at, &above);
                 assert!(frac(d, at.film.events.len()) <= 0.01, "{d}");
                 assert!(at.stats.counters.refractions > 0, "the 200 core refracts");
+                // Step traversal brackets the plateau's edge between two
+                // samples: its crossing must land on the rising side, whose
+                // gradient is the surface's, not on the plateau (zero
+                // gradient, a ray that goes on unbent).
+                let step = render(
+                    &sphere(
+                        48,
+                        &[
+                            "surface.filter=linear",
+                            "surface.iso=100.0",
+                            "render.traversal=step",
+                            "render.step=0.1",
+                        ],
+                    ),
+                    Some(vol()),
+                );
+                let ks = step.stats.counters;
+                assert_eq!(ks.degenerate_normals, 0);
+                let c = cmp(&step, &at.film.hits());
+                assert!(
+                    c.events_equal_fraction >= 0.99 && c.squares(c.p99) <= 1e-3,
+                    "{c:?}"
+                );
                 format!(
-                    "{} refractions; events differ from iso+1e-6 on {d} of {}",
+                    "{} refractions; events differ from iso+1e-6 on {d} of {}; step 0.1: {} degenerate normals, events equal {:.1}%, p99 {:.1e} squares",
                     at.stats.counters.refractions,
-                    at.film.events.len()
+                    at.film.events.len(),
+                    ks.degenerate_normals,
+                    100.0 * c.events_equal_fraction,
+                    c.squares(c.p99)
                 )
             },
         ),
@@ -469,6 +495,41 @@ fn cases() -> Vec<Case> {
                     out.push(format!("{what} {:.1}%", 100.0 * c.events_equal_fraction));
                 }
                 format!("events equal: {}", out.join(", "))
+            },
+        ),
+        (
+            "backdrop in front of the ball (z = -50) and through its centre (z = 31.5)",
+            "the plane is opaque: every ray ends on it, before the ball or at most one event in; events equal the analytic spheres on >= 99%, refracted p90 <= 0.01 units; step 0.1 agrees",
+            || {
+                let mut out = Vec::new();
+                for z in ["-50.0", "31.5"] {
+                    let at = format!("backdrop.center=[31.5, 31.5, {z}]");
+                    let s = sphere(64, &[at.as_str()]);
+                    let f = render(&s, None);
+                    let k = f.stats.counters;
+                    assert_eq!(k.missed_backdrop + k.terminated + k.undefined, 0, "{z}");
+                    let most = f.film.events.iter().fold(0.0f32, |m, &e| m.max(e));
+                    assert!(most <= 1.0, "{z}: {most} events");
+                    let r = cmp(&f, &reference(&s));
+                    assert_eq!(r.validity_mismatch, 0, "{z}: {r:?}");
+                    // (No refracted pixel in front: a NaN p90 passes.)
+                    assert!(
+                        r.events_equal_fraction >= 0.99 && !(r.refracted.p90 > 0.01),
+                        "{z}: {r:?}"
+                    );
+                    let step = render(
+                        &sphere(64, &[at.as_str(), "render.traversal=step", "render.step=0.1"]),
+                        None,
+                    );
+                    let c = cmp(&step, &f.film.hits());
+                    assert!(c.events_equal_fraction >= 0.99, "{z}: {c:?}");
+                    out.push(format!(
+                        "z = {z}: {} refractions, 0 misses, events equal {:.1}%",
+                        k.refractions,
+                        100.0 * r.events_equal_fraction
+                    ));
+                }
+                out.join("; ")
             },
         ),
         (

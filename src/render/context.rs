@@ -177,6 +177,7 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
             t0 = t0.max(ta);
             t1 = t1.min(tb);
         }
+        t1 = self.before_backdrop(o, d, t1);
         if t0 <= t1 && t1.is_finite() {
             Some((t0, t1))
         } else {
@@ -215,9 +216,27 @@ impl<'a, T: Coefficient> Ctx<'a, T> {
                 t1[l] = t1[l].min(tb);
             }
         }
+        for l in 0..N {
+            let at = |v: &[[f64; N]; 3]| DVec3::new(v[0][l], v[1][l], v[2][l]);
+            t1[l] = self.before_backdrop(at(o), at(d), t1[l]);
+        }
         std::array::from_fn(|l| {
             (!missed[l] && t0[l] <= t1[l] && t1[l].is_finite()).then_some((t0[l], t1[l]))
         })
+    }
+
+    /// `t1` cut short where the ray meets the backdrop first: the plane is
+    /// opaque, so a backdrop in front of the volume or through it ends the
+    /// ray's walk there, and the record stage finds that hit (the same
+    /// [`Backdrop::plane_t`](crate::scene::Backdrop::plane_t) from the same
+    /// origin). A backdrop beyond the box, every usual scene's, leaves
+    /// `t1` as it is, bit for bit.
+    #[inline(always)]
+    fn before_backdrop(&self, o: DVec3, d: DVec3, t1: f64) -> f64 {
+        match self.scene.backdrop.plane_t(o, d) {
+            Some(t) if t < t1 => t,
+            _ => t1,
+        }
     }
 
     /// World point → grid coordinates.

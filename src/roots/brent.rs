@@ -15,7 +15,8 @@ pub struct Root {
 
 /// Finds a sign change of `f` in `[a, b]` given `fa = f(a)` and `fb = f(b)` on
 /// opposite sides (by [`inside`]). Returns the point where the side changes,
-/// to within `tol` (absolute, in `x` units). Never evaluates outside `[a, b]`.
+/// to within `tol` (absolute, in `x` units), on its inside side once the
+/// bracket is that narrow. Never evaluates outside `[a, b]`.
 pub fn solve(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, fa: f64, fb: f64, tol: f64) -> Root {
     debug_assert!(inside(fa) != inside(fb), "Brent needs a bracket");
     // Work on h = f made strictly signed: values <= 0 count as outside, so
@@ -89,10 +90,14 @@ pub fn solve(mut f: impl FnMut(f64) -> f64, a: f64, b: f64, fa: f64, fb: f64, to
         fb = side(f(b));
         evals += 1;
     }
-    // `b` and `c` bracket the change; report the point on the far side of the
-    // change is not needed: either end is within tol, take their midpoint.
+    // `b` and `c` bracket the change within tol: report the end on the
+    // inside (f > iso). Where the outside is a plateau at exactly the
+    // iso-value (a scan's flat background, under the linear filter) the
+    // field's gradient is zero there, and the plateau's side would give the
+    // refraction a degenerate normal; the inside's side is where the field
+    // rises, whose gradient is the surface's.
     let x = if (c - b).abs() <= tol {
-        0.5 * (b + c)
+        if fb > 0.0 { b } else { c }
     } else {
         b
     };
@@ -130,5 +135,20 @@ mod tests {
             1e-9,
         );
         assert!((r.x - 0.7).abs() < 2e-9, "{r:?}");
+    }
+
+    /// Beside a plateau at exactly the iso-value the root is reported on
+    /// the rising side, entering or leaving: never on the plateau, whose
+    /// gradient is zero.
+    #[test]
+    fn plateau_ends_are_reported_on_the_inside() {
+        let rise = |x: f64| (x - 0.6).max(0.0);
+        let fall = |x: f64| (0.4 - x).max(0.0);
+        for tol in [1e-3, 1e-9, 1e-14] {
+            let r = solve(rise, 0.0, 1.0, 0.0, 0.4, tol);
+            assert!(rise(r.x) > 0.0 && r.x - 0.6 <= tol, "{tol}: {r:?}");
+            let r = solve(fall, 0.0, 1.0, 0.4, 0.0, tol);
+            assert!(fall(r.x) > 0.0 && 0.4 - r.x <= tol, "{tol}: {r:?}");
+        }
     }
 }

@@ -71,17 +71,23 @@ pub struct Backdrop {
 }
 
 impl Backdrop {
-    /// Backdrop coordinates of the ray's hit, if it hits with `t > 0`.
+    /// The ray parameter where the ray meets the plane, if it does with
+    /// `t > 0`. The plane is opaque from either side: a ray stops at the
+    /// first point of its path on it, before or inside the volume too.
     #[inline]
-    pub fn hit(&self, origin: DVec3, dir: DVec3) -> Option<(f64, f64)> {
+    pub fn plane_t(&self, origin: DVec3, dir: DVec3) -> Option<f64> {
         let denom = dir.dot(self.normal);
         if denom == 0.0 || !denom.is_finite() {
             return None;
         }
         let t = (self.center - origin).dot(self.normal) / denom;
-        if !(t > 0.0 && t.is_finite()) {
-            return None;
-        }
+        (t > 0.0 && t.is_finite()).then_some(t)
+    }
+
+    /// Backdrop coordinates of the ray's hit, if it hits with `t > 0`.
+    #[inline]
+    pub fn hit(&self, origin: DVec3, dir: DVec3) -> Option<(f64, f64)> {
+        let t = self.plane_t(origin, dir)?;
         let p = origin + t * dir - self.center;
         Some((p.dot(self.u_axis), p.dot(self.v_axis)))
     }

@@ -685,9 +685,13 @@ pub(super) fn resolve(
         },
     };
     if matches!(r.traversal, Traversal::Octree | Traversal::Distance) && classify.is_none() {
+        let what = match r.traversal {
+            Traversal::Distance => "the distance cubes are measured to classified cells",
+            _ => "the octree is built over classified cells",
+        };
         return Err(bad(
             "render.classify",
-            "the octree is built over classified cells: use bmcc, accc, accc2, accc4, accc8 or bezier (bezier0 .. bezier3)".into(),
+            format!("{what}: use bmcc, accc, accc2, accc4, accc8 or bezier (bezier0 .. bezier3)"),
         ));
     }
     // Step traversal samples every point: a classification it was given is
