@@ -145,31 +145,56 @@ fn f16_storage_stays_within_its_rounding_of_f64() {
     assert!(s.p50 < 0.02 && s.p90 < 0.12, "{s:?}");
 }
 
+/// `f16` coefficients are scaled by a power of two into its normal range:
+/// a step to 70000 (beyond 65504) and one to 1e-9 (within its subnormals)
+/// keep the step's shape; only a prefilter's overshoot far beyond the
+/// samples' range is refused (a 3-D checkerboard under degree 7's, which
+/// grows it 6363 times).
 #[test]
-fn f16_storage_refuses_coefficients_beyond_its_range() {
+fn f16_storage_scales_into_its_range_and_refuses_only_overshoot() {
     use snell::filter::FilterKind;
     use snell::prepare::AnyField;
     use snell::volume::{SampleType, Volume};
-    // A step to 70000: its prefiltered coefficients overshoot past 65504.
     let dims = [8usize, 8, 8];
-    let samples: Vec<f32> = (0..512)
-        .map(|i| if i % 8 < 4 { 0.0 } else { 70000.0 })
-        .collect();
-    let vol = Volume::new(dims, [1.0; 3], SampleType::F32, samples).unwrap();
-    let filter = FilterKind::parse("bspline3", 0.0).unwrap();
-    let err = AnyField::new(&vol, filter, Storage::F16, 0.0).unwrap_err();
-    let msg = err.to_string();
-    assert!(msg.contains("f16") && msg.contains("65504"), "{msg}");
-    // Within range, the same shape is accepted, and f32 takes either.
-    let small = Volume::new(
+    let step = |height: f32| {
+        let samples = (0..512)
+            .map(|i| if i % 8 < 4 { 0.0 } else { height })
+            .collect();
+        Volume::new(dims, [1.0; 3], SampleType::F32, samples).unwrap()
+    };
+    let cubic = FilterKind::parse("bspline3", 0.0).unwrap();
+    for height in [70000.0f32, 700.0, 1e-9] {
+        let vol = step(height);
+        let iso = height as f64 / 2.0;
+        let AnyField::F16(f) = AnyField::new(&vol, cubic, Storage::F16, iso).unwrap() else {
+            unreachable!()
+        };
+        let exact = snell::filter::Field::new(&vol, cubic);
+        // The step's profile along x, as f64 reconstructs it, within f16's
+        // 11 bits of the step's height.
+        for k in 0..=14 {
+            let p = glam::DVec3::new(1.5 + 0.25 * k as f64, 3.5, 3.5);
+            let want = exact.value(p) - iso;
+            let got = f.value(p) / f.scale();
+            assert!(
+                (got - want).abs() <= 2e-3 * height as f64,
+                "{height}: at {p:?} {got:e} against {want:e}"
+            );
+        }
+    }
+    let checker = Volume::new(
         dims,
         [1.0; 3],
         SampleType::F32,
         (0..512)
-            .map(|i| if i % 8 < 4 { 0.0 } else { 700.0 })
+            .map(|i| if (i % 8 + i / 8 % 8 + i / 64) % 2 == 0 { 1.0 } else { -1.0 })
             .collect(),
     )
     .unwrap();
-    assert!(AnyField::new(&small, filter, Storage::F16, 0.0).is_ok());
-    assert!(AnyField::new(&vol, filter, Storage::F32, 0.0).is_ok());
+    let septic = FilterKind::parse("bspline7", 0.0).unwrap();
+    let err = AnyField::new(&checker, septic, Storage::F16, 0.0).unwrap_err();
+    let msg = err.to_string();
+    assert!(msg.contains("f16") && msg.contains("65504"), "{msg}");
+    assert!(AnyField::new(&checker, cubic, Storage::F16, 0.0).is_ok());
+    assert!(AnyField::new(&checker, septic, Storage::F32, 0.0).is_ok());
 }

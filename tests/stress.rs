@@ -344,6 +344,29 @@ fn cases() -> Vec<Case> {
             },
         ),
         (
+            "f16 coefficients of sphere values x 1e-9 (within f16's subnormals) and x 1e6 (beyond 65504)",
+            "scaled into f16's normal range: events equal to the unscaled f16 render on >= 99.5%, p99 <= 1e-3 squares",
+            || {
+                let f16 = "render.coefficients=f16";
+                let one = render(&sphere(48, &[f16]), Some(sphere_volume(1.0)));
+                let mut out = Vec::new();
+                for (k, iso) in [(1e-9f32, "surface.iso=0.5e-9"), (1e6, "surface.iso=0.5e6")] {
+                    let f = render(&sphere(48, &[iso, f16]), Some(sphere_volume(k)));
+                    let c = cmp(&f, &one.film.hits());
+                    assert!(
+                        c.events_equal_fraction >= 0.995 && c.squares(c.p99) <= 1e-3,
+                        "{k}: {c:?}"
+                    );
+                    out.push(format!(
+                        "x {k:e}: events equal {:.2}%, p99 {:.1e} squares",
+                        100.0 * c.events_equal_fraction,
+                        c.squares(c.p99)
+                    ));
+                }
+                out.join("; ")
+            },
+        ),
+        (
             "a fill value (NetCDF's 9.97e36) in a slab along one face and a corner voxel, away from a ball's surface (f32, iso 0.5), linear",
             "the surface does not move: the frame is bitwise the one without the fill",
             || {

@@ -260,13 +260,14 @@ impl<T: Coefficient> Coeffs<T> {
         &mut self.data
     }
 
-    /// The grid less `shift` in another storage: each value `v` becomes
-    /// `v - shift` (in `f64`), rounded once to `U`.
-    pub fn convert_shifted<U: Coefficient>(&self, shift: f64) -> Coeffs<U> {
+    /// The grid less `shift`, times `scale` (a power of two, so exactly),
+    /// in another storage: each value `v` becomes `(v - shift) · scale` (in
+    /// `f64`), rounded once to `U`.
+    pub fn convert_shifted<U: Coefficient>(&self, shift: f64, scale: f64) -> Coeffs<U> {
         let mut data = vec![U::default(); self.data.len()];
         crate::heap::advise_huge_pages(&mut data);
         for (d, v) in data.iter_mut().zip(&self.data) {
-            *d = U::from_f64(v.to_f64() - shift);
+            *d = U::from_f64((v.to_f64() - shift) * scale);
         }
         Coeffs {
             dims: self.dims,

@@ -55,15 +55,19 @@ macro_rules! with_support {
 /// A reconstructed volume: coefficients + kernel, evaluable anywhere.
 /// `T` is the coefficient storage ([`Coefficient`]); arithmetic is `f64`.
 ///
-/// The coefficients may be stored relative to an [`Field::offset`]: the
-/// reconstruction is then `offset + Σ w·c`, and every evaluation returns
-/// the `Σ w·c` part. The renderer and the classifications compare
-/// evaluations only with [`Field::separating_iso`], which maps the scene's
-/// iso-value into the same frame, so a shifted field renders the same
-/// surface. `f16` storage is centred on the scene's iso-value this way:
-/// near the surface the stored values are then small, where `f16`'s
-/// absolute precision is fine, instead of near the iso-value, where its
-/// 11 bits round by the data's scale over 2048.
+/// The coefficients may be stored relative to an [`Field::offset`] and
+/// multiplied by a power of two, [`Field::scale`]: the reconstruction is
+/// then `offset + Σ w·c / scale`, and every evaluation returns the `Σ w·c`
+/// part. The renderer and the classifications compare evaluations only
+/// with [`Field::separating_iso`], which maps the scene's iso-value into
+/// the same frame, and the surface's normal is the gradient's direction,
+/// so a shifted and scaled field renders the same surface. `f16` storage
+/// is centred on the scene's iso-value this way: near the surface the
+/// stored values are then small, where `f16`'s absolute precision is
+/// fine, instead of near the iso-value, where its 11 bits round by the
+/// data's scale over 2048; and scaled, so that a field of any magnitude
+/// lies in `f16`'s normal range, neither in its subnormals (a field of
+/// values near 1e-9 would round to zero) nor beyond 65504.
 #[derive(Clone, Debug)]
 pub struct Field<T: Coefficient = f64> {
     kind: FilterKind,
@@ -78,6 +82,8 @@ pub struct Field<T: Coefficient = f64> {
     exponents: std::sync::OnceLock<[u64; 32]>,
     /// What the coefficients are relative to (0 unless shifted).
     offset: f64,
+    /// The power of two they are multiplied by (1 unless scaled).
+    scale: f64,
 }
 
 impl<T: Coefficient> Field<T> {
@@ -138,19 +144,32 @@ impl<T: Coefficient> Field<T> {
             max_abs,
             exponents: std::sync::OnceLock::new(),
             offset: 0.0,
+            scale: 1.0,
         }
     }
 
     /// This field with its coefficients taken as stored relative to
-    /// `offset`: the field `offset + Σ w·c` (see [`Field`]).
-    pub fn with_offset(self, offset: f64) -> Field<T> {
-        Field { offset, ..self }
+    /// `offset` and multiplied by `scale` (a power of two): the field
+    /// `offset + Σ w·c / scale` (see [`Field`]).
+    pub fn with_frame(self, offset: f64, scale: f64) -> Field<T> {
+        debug_assert!(scale > 0.0 && scale.to_bits() & ((1 << 52) - 1) == 0);
+        Field {
+            offset,
+            scale,
+            ..self
+        }
     }
 
     /// What the stored coefficients, and so every evaluation, are relative
-    /// to: the reconstructed value is `offset() + value(p)`.
+    /// to: the reconstructed value is `offset() + value(p) / scale()`.
     pub fn offset(&self) -> f64 {
         self.offset
+    }
+
+    /// The power of two the stored coefficients, and so every evaluation,
+    /// are multiplied by ([`Field::offset`]).
+    pub fn scale(&self) -> f64 {
+        self.scale
     }
 
     pub fn kind(&self) -> FilterKind {
@@ -200,11 +219,12 @@ impl<T: Coefficient> Field<T> {
     /// is the bound of the largest one's power of two, within 2× of it.
     ///
     /// The result is in the frame of the stored coefficients (`iso` less
-    /// [`Field::offset`]): what evaluations are compared with.
+    /// [`Field::offset`], times [`Field::scale`]): what evaluations are
+    /// compared with.
     pub fn separating_iso(&self, iso: f64) -> f64 {
-        let scale = self.magnitude_up_to(1e6 * iso.abs());
-        let iso = iso - self.offset;
-        iso + 1e-11 * iso.abs().max(scale).max(f64::MIN_POSITIVE)
+        let magnitude = self.magnitude_up_to(1e6 * iso.abs() * self.scale);
+        let iso = (iso - self.offset) * self.scale;
+        iso + 1e-11 * iso.abs().max(magnitude).max(f64::MIN_POSITIVE)
     }
 
     /// The largest coefficient magnitude not above `bound` (a 0 bound: none),

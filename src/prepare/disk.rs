@@ -44,12 +44,14 @@ fn write_u64s(w: &mut dyn Write, v: &[u64]) -> std::io::Result<()> {
 
 /// A field's name in cache keys and files: the filter's, and the storage
 /// unless it is `f64` (so `f64` cache files keep their names); for `f16`
-/// also the iso-value its coefficients are centred on.
+/// also the iso-value its coefficients are centred on, and `scaled`: they
+/// are multiplied by a power of two the volume and that centre give
+/// (`f16_scale`), which older files, named without the word, were not.
 pub(super) fn field_name(filter: FilterKind, storage: Storage, centre: f64) -> String {
     match storage {
         Storage::F64 => filter.cache_key(),
         Storage::F16 => format!(
-            "{}-{}-{:016x}",
+            "{}-{}-scaled-{:016x}",
             filter.cache_key(),
             storage.name(),
             centre.to_bits()

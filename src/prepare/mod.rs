@@ -219,6 +219,7 @@ impl AnyField {
             Storage::F16 => AnyField::F16(Arc::new(f16_field(
                 f32_field(vol, filter, Storage::F16)?,
                 centre,
+                f16_scale(vol, centre),
             )?)),
         })
     }
@@ -292,27 +293,48 @@ fn f32_field(vol: &Volume, filter: FilterKind, storage: Storage) -> Result<Field
     Ok(f)
 }
 
-/// `f` less `centre`, rounded once to `f16` (so the values near the surface
-/// at iso `centre` are small, where `f16` is precise), or an error naming the
-/// largest when some lie beyond `f16`'s range (they would become
-/// infinite).
-fn f16_field(f: Field<f32>, centre: f64) -> Result<Field<half::f16>, SceneError> {
+/// The power of two `f16` coefficients are stored multiplied by
+/// ([`Field::scale`]): the one that brings the samples' largest distance
+/// from `centre` into `[16, 32)`, so that a field of any magnitude lies in
+/// `f16`'s normal range (11 significant bits down to 2^-14, a 2^-19 of
+/// that distance), not in its subnormals, and leaves the prefilter's
+/// overshoot a factor of 2047 below `f16`'s largest value (65504): noise
+/// at the Nyquist rate grows 3·3·3 = 27 times under the cubic prefilter,
+/// 6363 times under degree 7's. A function of the volume and the centre
+/// alone, so a disk cache's file needs no record of it.
+pub(super) fn f16_scale(vol: &Volume, centre: f64) -> f64 {
+    let (lo, hi) = vol.value_range();
+    let reach = (hi as f64 - centre).abs().max((lo as f64 - centre).abs());
+    if !(reach.is_finite() && reach > 0.0) {
+        return 1.0;
+    }
+    let exponent = 4 - reach.log2().floor() as i32;
+    2f64.powi(exponent.clamp(-1000, 1000))
+}
+
+/// `f` less `centre`, times `scale` ([`f16_scale`]), rounded once to `f16`
+/// (so the values near the surface at iso `centre` are small, where `f16`
+/// is precise), or an error naming the largest when some still lie beyond
+/// `f16`'s range (they would become infinite).
+fn f16_field(f: Field<f32>, centre: f64, scale: f64) -> Result<Field<half::f16>, SceneError> {
     // NaN-propagating: a NaN coefficient or centre is refused too.
     let max = f.coeffs().data().iter().fold(0.0f64, |m, c| {
         let d = (c.to_f64() - centre).abs();
         if d > m || d.is_nan() { d } else { m }
     });
-    if max.is_nan() || max > half::f16::MAX.to_f64() {
+    if max.is_nan() || max * scale > half::f16::MAX.to_f64() {
         return Err(SceneError::Storage {
             storage: Storage::F16.name(),
             msg: format!(
                 "the largest prefiltered coefficient less the iso-value {}, {max:.6e}, \
-                 is beyond f16's range (±65504); use \"f32\" or \"f64\"",
+                 is over 2000 times the samples' largest distance from it (the prefilter's \
+                 overshoot of noisy data): beyond f16's range (±65504) once scaled; use \"f32\" or \"f64\"",
                 crate::human::exact(centre)
             ),
         });
     }
-    Ok(Field::from_coeffs(f.kind(), f.coeffs().convert_shifted(centre)).with_offset(centre))
+    let coeffs = f.coeffs().convert_shifted(centre, scale);
+    Ok(Field::from_coeffs(f.kind(), coeffs).with_frame(centre, scale))
 }
 
 /// Inputs of one frame.
@@ -694,9 +716,11 @@ impl Cache {
             Storage::F32 => {
                 read_field(path, filter, vol.dims()).map(|f| AnyField::F32(Arc::new(f)))
             }
-            // Stored less `centre` (the file's name says which).
-            Storage::F16 => read_field(path, filter, vol.dims())
-                .map(|f: Field<half::f16>| AnyField::F16(Arc::new(f.with_offset(centre)))),
+            // Stored less `centre` (the file's name says which), times the
+            // scale the volume and the centre give.
+            Storage::F16 => read_field(path, filter, vol.dims()).map(|f: Field<half::f16>| {
+                AnyField::F16(Arc::new(f.with_frame(centre, f16_scale(vol, centre))))
+            }),
         };
         match read {
             Ok(f) => Some(f),

@@ -24,8 +24,10 @@ pub enum Storage {
     /// 2 bytes per coefficient (11 significant bits, at most ±65504): a
     /// quarter of `f64`'s memory. Prefiltered as `f32`, less the scene's
     /// iso-value (so the values near the surface are small, where `f16`
-    /// is precise), then rounded once; a field whose shifted coefficients
-    /// exceed the range is refused. What it costs in accuracy is measured
+    /// is precise), times a power of two that puts the field in `f16`'s
+    /// normal range whatever its magnitude, then rounded once; a field
+    /// whose scaled coefficients still exceed the range (a prefilter's
+    /// overshoot of noise, over 2000-fold) is refused. What it costs in accuracy is measured
     /// in BENCHMARKS.md (*Coefficient storage*) and `tests/storage.rs`.
     F16,
 }
