@@ -370,7 +370,12 @@ mod tests {
         assert_eq!(written_path(&dir.join("loop1")), dir.join("loop1"));
         let err = write_atomic(&dir.join("loop1"), |w| w.write_all(b"x")).unwrap_err();
         assert!(err.to_string().contains("loop"), "{err}");
-        assert!(fs::symlink_metadata(dir.join("loop1")).unwrap().file_type().is_symlink());
+        assert!(
+            fs::symlink_metadata(dir.join("loop1"))
+                .unwrap()
+                .file_type()
+                .is_symlink()
+        );
         fs::remove_dir_all(&dir).unwrap();
     }
 
@@ -395,7 +400,11 @@ mod tests {
             assert!(err.to_string().contains("read-only"), "{err}");
             assert_eq!(fs::read(&target).unwrap(), b"old");
         }
-        assert_eq!(fs::read_dir(&dir).unwrap().count(), 1, "no temporary file left");
+        assert_eq!(
+            fs::read_dir(&dir).unwrap().count(),
+            1,
+            "no temporary file left"
+        );
         fs::remove_dir_all(&dir).unwrap();
     }
 

@@ -187,7 +187,13 @@ fn f16_storage_scales_into_its_range_and_refuses_only_overshoot() {
         [1.0; 3],
         SampleType::F32,
         (0..512)
-            .map(|i| if (i % 8 + i / 8 % 8 + i / 64) % 2 == 0 { 1.0 } else { -1.0 })
+            .map(|i| {
+                if (i % 8 + i / 8 % 8 + i / 64) % 2 == 0 {
+                    1.0
+                } else {
+                    -1.0
+                }
+            })
             .collect(),
     )
     .unwrap();

@@ -315,16 +315,15 @@ pub fn check_output(path: &Path) -> anyhow::Result<PathBuf> {
     // A symbolic link is written through, a dangling one to the file it
     // names: that file's folder must exist too.
     let written = snell::atomic::written_path(path);
-    if written != path {
-        if let Some(d) = written.parent().filter(|d| !d.as_os_str().is_empty()) {
-            if !d.is_dir() {
-                bail!(
-                    "{}: a symbolic link to {}, whose directory does not exist",
-                    path.display(),
-                    written.display()
-                );
-            }
-        }
+    if written != path
+        && let Some(d) = written.parent().filter(|d| !d.as_os_str().is_empty())
+        && !d.is_dir()
+    {
+        bail!(
+            "{}: a symbolic link to {}, whose directory does not exist",
+            path.display(),
+            written.display()
+        );
     }
     snell::atomic::check_target(path)
         .map_err(|e| anyhow::anyhow!("{}: {e}; outputs go to files", path.display()))?;

@@ -1078,12 +1078,18 @@ checker = 8.0
         // A u axis out of the plane is projected, and said to be; its
         // length and a rounding error's tilt are not worth a word.
         let s = parse(&["backdrop.u_axis=[2.0, 0.0, 1e-9]"]).unwrap();
-        assert!(s.ignored_settings().is_empty(), "{:?}", s.ignored_settings());
+        assert!(
+            s.ignored_settings().is_empty(),
+            "{:?}",
+            s.ignored_settings()
+        );
         assert_eq!(s.backdrop.u_axis, DVec3::X);
         let s = parse(&["backdrop.u_axis=[1.0, 0.0, 1.0]"]).unwrap();
         assert_eq!(
             s.ignored_settings(),
-            ["--set backdrop.u_axis=[1.0, 0.0, 1.0] is not in the backdrop's plane (45.000° out of it): its projection onto the plane, [1, 0, 0], is the u axis"]
+            [
+                "--set backdrop.u_axis=[1.0, 0.0, 1.0] is not in the backdrop's plane (45.000° out of it): its projection onto the plane, [1, 0, 0], is the u axis"
+            ]
         );
     }
 

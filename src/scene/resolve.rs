@@ -736,7 +736,12 @@ pub(super) fn resolve(
     };
 
     let mut ignored = ignored_settings(written, &f, &surface, &render);
-    ignored.extend(tilted_u_axis(written, u_raw, backdrop.normal, backdrop.u_axis));
+    ignored.extend(tilted_u_axis(
+        written,
+        u_raw,
+        backdrop.normal,
+        backdrop.u_axis,
+    ));
     let scene = Scene {
         ignored,
         overrides: Vec::new(),
