@@ -247,6 +247,29 @@ fn render_writes_every_output() {
     assert_eq!(c["pixels"], 64 * 48);
 }
 
+/// A camera far enough for f64 to round its rays' origins by more than a
+/// millionth of a voxel is warned of; one at the stress suite's 1e9 is not.
+#[test]
+fn a_far_camera_is_warned_of() {
+    let t = Tmp::new("far");
+    let run = |d: &str, kind: &str| {
+        ok(t.run(&format!(
+            "render {{sphere}} -o f.png -q --set image.width=8 --set image.height=8 \
+             --set camera.kind={kind} --set camera.height=50 --set camera.fov_y=1e-9 \
+             --set camera.position=[31.5,31.5,-{d}]"
+        )))
+    };
+    for kind in ["orthographic", "perspective"] {
+        let o = run("1e12", kind);
+        assert!(
+            stderr(&o).contains("rounds its rays' origins by about 1.1e-4 voxels"),
+            "{}",
+            stderr(&o)
+        );
+        assert!(!stderr(&run("1e9", kind)).contains("rounds"));
+    }
+}
+
 #[test]
 fn iso_outside_the_data_is_a_warning_and_a_backdrop_image() {
     let t = Tmp::new("iso");

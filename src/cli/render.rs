@@ -184,6 +184,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             a.scene.display()
         );
     }
+    warn_far_camera(&a.scene, &scene, &prep.volume);
     let (lo, hi) = prep.volume.value_range();
     let iso = scene.surface.iso;
     if !(iso >= lo as f64 && iso <= hi as f64) {
@@ -344,6 +345,30 @@ fn render_orbit(
         print_table(stats);
     }
     Ok(())
+}
+
+/// Warns of a camera so far away that `f64` rounds its rays' origins by
+/// more than a millionth of a voxel ([`snell::scene::Camera::origin_rounding`]):
+/// the hits move with it, as no traversal can undo.
+fn warn_far_camera(path: &Path, scene: &Scene, volume: &snell::volume::Volume) {
+    let extent = glam::DVec3::from_array(volume.extent());
+    let voxel = volume.spacing().into_iter().fold(f64::INFINITY, f64::min);
+    let rounding = scene.camera.origin_rounding(0.5 * extent);
+    if rounding > 1e-6 * voxel {
+        let how = match scene.camera.projection {
+            snell::scene::Projection::Orthographic { .. } => {
+                "an orthographic camera's distance does not change its view: move it closer"
+            }
+            snell::scene::Projection::Perspective { .. } => {
+                "move it closer, with a wider fov_y for the same framing"
+            }
+        };
+        eprintln!(
+            "warning: {}: the camera is so far from the volume that f64 rounds its rays' origins by about {:.1e} voxels, which moves the hits; {how}",
+            path.display(),
+            rounding / voxel
+        );
+    }
 }
 
 /// Warns of rays that ended undefined (frame `k` of an orbit).

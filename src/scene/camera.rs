@@ -122,6 +122,17 @@ impl Camera {
         Ok(cam)
     }
 
+    /// How far `f64` rounding may move a ray's origin, in world units: the
+    /// camera's distance from the origin or from `centre` (the volume's),
+    /// whichever is larger, times `f64`'s unit roundoff. Far cameras
+    /// (1e12 world units from a 64-voxel volume) move hits measurably,
+    /// which no traversal can undo; commands warn when this passes a
+    /// millionth of a voxel.
+    pub fn origin_rounding(&self, centre: DVec3) -> f64 {
+        let d = self.position.length().max((self.position - centre).length());
+        d * f64::EPSILON / 2.0
+    }
+
     /// Ray through continuous image position `(x, y)` (pixel `(px, py)` has its
     /// centre at `(px + 0.5, py + 0.5)`; row 0 at the top). Returns origin and
     /// unit direction.
