@@ -59,8 +59,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let (hit_a, hit_b) = (hits_a.is_some(), hits_b.is_some());
     if hit_a != hit_b {
         let (hit, other) = if hit_a { (&a.a, &a.b) } else { (&a.b, &a.a) };
+        let what = if other
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
+        {
+            "an EXR without u, v, events channels, a colour image"
+        } else {
+            "not an EXR"
+        };
         anyhow::bail!(
-            "{} is a hit-position EXR but {} is not (a colour image, or an EXR without u, v, events channels): compare hits with hits, colour images with colour images",
+            "{} is a hit-position EXR but {} is {what}: compare hits with hits, colour images with colour images",
             hit.display(),
             other.display()
         );

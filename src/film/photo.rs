@@ -30,7 +30,15 @@ pub fn read(path: &Path) -> Result<RgbImage, String> {
         r.limits(limits);
         Ok::<_, String>(r)
     };
-    let (w, h) = reader()?.into_dimensions().map_err(|e| e.to_string())?;
+    let (w, h) = reader()?.into_dimensions().map_err(|e| match e {
+        // The image crate's words for bytes it knows no format of.
+        image::ImageError::Unsupported(u)
+            if matches!(u.kind(), image::error::UnsupportedErrorKind::Format(_)) =>
+        {
+            "not an image snell reads (PNG or JPEG, or EXR by its name)".to_string()
+        }
+        e => e.to_string(),
+    })?;
     let pixels = w as u64 * h as u64;
     if pixels == 0 || pixels > MAX_PIXELS {
         return Err(format!(

@@ -207,11 +207,33 @@ impl Scene {
     }
 
     fn load_checked(path: &Path, overrides: &[String], frame: bool) -> Result<Scene, SceneError> {
-        let text = crate::input::read_to_string(path).map_err(|source| SceneError::Io {
-            path: path.to_path_buf(),
-            source,
+        // A volume or an image given where a scene goes is the likely
+        // mistake behind a file that is not TOML: say so, and how to make
+        // a scene for a volume.
+        const NOT_A_SCENE: &str = "a scene is a TOML text file (scenes/*.toml); for a volume, `snell scene VOLUME -o SCENE.toml` writes one";
+        let text = crate::input::read_to_string(path).map_err(|source| {
+            if source.kind() == std::io::ErrorKind::InvalidData {
+                SceneError::Syntax {
+                    path: path.to_path_buf(),
+                    msg: format!("not a scene file: it is not text ({source}); {NOT_A_SCENE}"),
+                }
+            } else {
+                SceneError::Io {
+                    path: path.to_path_buf(),
+                    source,
+                }
+            }
         })?;
-        let scene = Scene::parse_unchecked(&text, path, overrides)?;
+        let toml_named = path
+            .extension()
+            .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+        let scene = Scene::parse_unchecked(&text, path, overrides).map_err(|e| match e {
+            SceneError::Syntax { path, msg } if !toml_named => SceneError::Syntax {
+                path,
+                msg: format!("{msg} (is it a scene file? {NOT_A_SCENE})"),
+            },
+            e => e,
+        })?;
         if frame {
             scene.check_frame_memory()?;
         }

@@ -56,6 +56,14 @@ fn whole_range(key: &str) -> Option<(u32, u32)> {
 /// serde's refusal of `key`'s value in plain words, with the setting's own
 /// range where it has one.
 pub(super) fn setting_message(key: &str, serde_msg: &str) -> String {
+    // The scene's top level holds sections, not settings.
+    if !key.contains('.')
+        && let Some(rest) = serde_msg.trim().strip_prefix("unknown field ")
+    {
+        return format!(
+            "unknown section {rest}; a setting is written section.key (e.g. --set image.width=64, or width = 64 under [image])"
+        );
+    }
     plain_serde_message(serde_msg, whole_range(key))
 }
 

@@ -42,18 +42,10 @@ pub fn read(path: &Path, spec: &RawSpec, opts: &LoadOptions) -> Result<Volume, V
     let file = crate::input::open(path).map_err(|e| VolumeError::io(path, e))?;
     let len = file.metadata().map_err(|e| VolumeError::io(path, e))?.len();
     let [nx, ny, nz] = spec.dims;
-    if len < end {
-        return Err(VolumeError::Truncated {
-            path: path.to_path_buf(),
-            need: end,
-            got: len,
-            what: format!(
-                "{nx}x{ny}x{nz} samples of {ty}{}",
-                offset_phrase(spec.offset)
-            ),
-        });
-    }
-    if len > end {
+    // A headerless file has no header to be truncated against: a length
+    // either way is the dims' or the type's mismatch, with the dims that
+    // would fit it.
+    if len != end {
         return Err(VolumeError::format(
             path,
             length_mismatch_message(spec, need, len),
