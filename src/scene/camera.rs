@@ -129,7 +129,10 @@ impl Camera {
     /// which no traversal can undo; commands warn when this passes a
     /// millionth of a voxel.
     pub fn origin_rounding(&self, centre: DVec3) -> f64 {
-        let d = self.position.length().max((self.position - centre).length());
+        let d = self
+            .position
+            .length()
+            .max((self.position - centre).length());
         d * f64::EPSILON / 2.0
     }
 

@@ -915,6 +915,43 @@ checker = 8.0
         );
     }
 
+    /// A `--set` of one backdrop pattern drops the other's settings: a
+    /// photograph over a checkerboard, a checkerboard over a photograph.
+    #[test]
+    fn a_set_switches_the_backdrop_pattern() {
+        let s = parse(&["backdrop.checker_colors=[[1.0, 0.0, 0.0], [0.0, 0.0, 1.0]]"]).unwrap();
+        assert!(matches!(s.backdrop.pattern, Pattern::Checker { .. }));
+        let photo_path = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/photo.jpg");
+        let set_photo = format!("backdrop.image={photo_path}");
+        let s = parse(&[&set_photo, "backdrop.width=100.0"]).unwrap();
+        assert!(
+            s.ignored_settings().is_empty(),
+            "{:?}",
+            s.ignored_settings()
+        );
+        assert!(s.backdrop_image.is_some());
+        let photo = |t: &str| {
+            t.replace(
+                "checker = 8.0",
+                &format!("image = \"{photo_path}\"\nwidth = 80.0"),
+            )
+        };
+        let s = parse_text(photo, &["backdrop.checker=4.0"]).unwrap();
+        assert!(matches!(s.backdrop.pattern, Pattern::Checker { size, .. } if size == 4.0));
+        assert!(s.backdrop_image.is_none());
+        // Of two, the last wins; both in the file is a contradiction.
+        let s = parse(&[&set_photo, "backdrop.checker=4.0"]).unwrap();
+        assert!(s.backdrop_image.is_none());
+        let both = |t: &str| {
+            t.replace(
+                "checker = 8.0",
+                &format!("checker = 8.0\nimage = \"{photo_path}\""),
+            )
+        };
+        let e = parse_text(both, &[]).unwrap_err();
+        assert!(e.to_string().contains("not both"), "{e}");
+    }
+
     fn parse_text(edit: impl Fn(&str) -> String, o: &[&str]) -> Result<Scene, SceneError> {
         let o: Vec<String> = o.iter().map(|s| s.to_string()).collect();
         Scene::parse(&edit(SCENE), Path::new("test.toml"), &o)

@@ -75,6 +75,21 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
             _ => {}
         }
     }
+    // Likewise a backdrop has one pattern: a photograph set over a
+    // checkerboard drops the checker's settings, and a checker set over a
+    // photograph drops the photograph's.
+    if let (["backdrop", pattern], Some(toml::Value::Table(backdrop))) =
+        (parts.as_slice(), table.get_mut("backdrop"))
+    {
+        let drop: &[&str] = match *pattern {
+            "image" => &["checker", "checker_colors"],
+            "checker" => &["image", "width", "outside"],
+            _ => &[],
+        };
+        for key in drop {
+            backdrop.remove(*key);
+        }
+    }
     let mut cur = table;
     for p in &parts[..parts.len() - 1] {
         let entry = cur
