@@ -92,25 +92,30 @@ impl HitComparison {
             self.event_mismatch,
             100.0 * self.events_equal_fraction
         );
+        let n = crate::human::sig4;
         s.push_str(&format!(
-            "hit error (backdrop units): p50 {:.3e}  p90 {:.3e}  p99 {:.3e}  max {:.3e}  mean {:.3e}\n",
-            self.p50, self.p90, self.p99, self.max, self.mean
+            "hit error (backdrop units): p50 {}  p90 {}  p99 {}  max {}  mean {}\n",
+            n(self.p50),
+            n(self.p90),
+            n(self.p99),
+            n(self.max),
+            n(self.mean)
         ));
         let r = &self.refracted;
         s.push_str(&format!(
-            "refracted pixels ({}): p50 {:.3e}  p90 {:.3e}  p99 {:.3e} {unit}\n",
+            "refracted pixels ({}): p50 {}  p90 {}  p99 {} {unit}\n",
             r.pixels,
-            self.squares(r.p50),
-            self.squares(r.p90),
-            self.squares(r.p99)
+            n(self.squares(r.p50)),
+            n(self.squares(r.p90)),
+            n(self.squares(r.p99))
         ));
         if self.checker.is_some() {
             s.push_str(&format!(
-                "hit error ({unit}):        p50 {:.3e}  p90 {:.3e}  p99 {:.3e}  max {:.3e}\n",
-                self.squares(self.p50),
-                self.squares(self.p90),
-                self.squares(self.p99),
-                self.squares(self.max)
+                "hit error ({unit}):        p50 {}  p90 {}  p99 {}  max {}\n",
+                n(self.squares(self.p50)),
+                n(self.squares(self.p90)),
+                n(self.squares(self.p99)),
+                n(self.squares(self.max))
             ));
         }
         s

@@ -37,6 +37,26 @@ pub fn num(x: f64) -> String {
     }
 }
 
+/// `x` to 4 significant digits for tables of measurements: positional
+/// from 1e-3 to below 1e6 without trailing zeros (`0.3183`, `6.391`,
+/// `2072`), scientific beyond (`1.526e-5`); `0`, `inf`, `NaN` as such.
+pub fn sig4(x: f64) -> String {
+    if !x.is_finite() {
+        return x.to_string();
+    }
+    if x == 0.0 {
+        return "0".into();
+    }
+    // Rounded to 4 digits first, so 999.96 counts as the 1000 it prints as.
+    let rounded: f64 = format!("{x:.3e}").parse().unwrap_or(x);
+    if (1e-3..1e6).contains(&rounded.abs()) {
+        let exp = rounded.abs().log10().floor() as i32;
+        let decimals = (3 - exp).max(0) as usize;
+        return trim_fraction(&format!("{rounded:.decimals$}"));
+    }
+    format!("{x:.3e}")
+}
+
 /// Three numbers as `a x b x c` with [`num`].
 pub fn triple(v: [f64; 3]) -> String {
     format!("{} x {} x {}", num(v[0]), num(v[1]), num(v[2]))
@@ -78,6 +98,24 @@ fn trim_fraction(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sig4_keeps_four_digits() {
+        for (x, want) in [
+            (0.0, "0"),
+            (0.31831, "0.3183"),
+            (6.3914, "6.391"),
+            (2072.4, "2072"),
+            (999.96, "1000"),
+            (0.5, "0.5"),
+            (1.526e-5, "1.526e-5"),
+            (-3.2741e4, "-32740"),
+            (1.5e6, "1.500e6"),
+            (f64::NAN, "NaN"),
+        ] {
+            assert_eq!(sig4(x), want, "{x}");
+        }
+    }
 
     #[test]
     fn people_get_seven_digits_and_scientific_extremes() {

@@ -103,6 +103,19 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let dir = a.dir.canonicalize().unwrap_or_else(|_| a.dir.clone());
     let ex = povray::export(&dir, &scene, &vol, &opts)?;
+    // POV-Ray interpolates trilinearly or by Catmull-Rom only: a scene of
+    // another filter is exported with the nearest, another surface.
+    let pov_filter = ex.interpolation.filter();
+    if pov_filter != scene.surface.filter {
+        eprintln!(
+            "note: {}: POV-Ray interpolates its density by {} (interpolate {}), not the scene's {}: compare its hits with `snell render --set surface.filter={}`",
+            a.scene.display(),
+            pov_filter.name(),
+            ex.interpolation.keyword(),
+            scene.surface.filter.name(),
+            pov_filter.name()
+        );
+    }
 
     if !a.json {
         let m = &ex.mapping;
