@@ -1053,18 +1053,25 @@ fn scene_frames_a_volume_that_renders() {
     }
     // Through a symbolic link -o to a scene elsewhere, the path is relative
     // to the folder of the file written; a dangling link counts as a file
-    // that exists.
+    // that exists, and --force writes the file it names (whose folder must
+    // exist).
     #[cfg(unix)]
     {
         std::fs::create_dir(t.path("links")).unwrap();
         std::fs::write(t.path("scenes/linked.toml"), "").unwrap();
         let link = t.path("links/ball.toml");
         std::os::unix::fs::symlink("../scenes/linked.toml", &link).unwrap();
+        std::os::unix::fs::symlink("../scenes/new.toml", t.path("links/new.toml")).unwrap();
         std::os::unix::fs::symlink("../nowhere/gone.toml", t.path("links/gone.toml")).unwrap();
-        for l in ["ball", "gone"] {
+        for l in ["ball", "new"] {
             let o = t.run(&format!("scene ball.nrrd -o links/{l}.toml"));
             assert_fails(&o, &[".toml", "exists", "--force"]);
         }
+        let o = t.run("scene ball.nrrd -o links/gone.toml --force");
+        assert_fails(&o, &["gone.toml", "whose directory does not exist"]);
+        ok(t.run("scene ball.nrrd -o links/new.toml --force"));
+        let text = std::fs::read_to_string(t.path("scenes/new.toml")).unwrap();
+        assert!(text.contains("path = \"../ball.nrrd\""), "{text}");
         ok(t.run("scene ball.nrrd -o links/ball.toml --force"));
         let text = std::fs::read_to_string(t.path("scenes/linked.toml")).unwrap();
         assert!(text.contains("path = \"../ball.nrrd\""), "{text}");

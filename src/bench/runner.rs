@@ -642,7 +642,9 @@ not per configuration"
                     method: r.method.name(),
                     tagged: r.tags.count(),
                     fraction: r.tags.count() as f64 / total.max(1) as f64,
-                    ratio_to_bmcc: bmcc.map(|b| r.tags.count() as f64 / b.max(1) as f64),
+                    ratio_to_bmcc: bmcc
+                        .filter(|&b| b > 0)
+                        .map(|b| r.tags.count() as f64 / b as f64),
                     ms: r.seconds * 1e3,
                 })
                 .collect(),

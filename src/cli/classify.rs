@@ -117,10 +117,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                 "method": r.method.name(),
                 "tagged": n,
                 "fraction": n as f64 / total.max(1) as f64,
-                "ratio_to_bmcc": bmcc.map(|b| n as f64 / b.max(1) as f64),
+                // None where BMCC tags nothing: 0/0 is no ratio.
+                "ratio_to_bmcc": bmcc.filter(|&b| b > 0).map(|b| n as f64 / b as f64),
                 "excess_over_exact": exact.map(|e| r.tags.excess_over(&e.tags)),
                 "contains_exact": exact.map(|e| e.tags.is_subset_of(&r.tags)),
-                "seconds": r.seconds,
+                "classify_s": r.seconds,
             })
         })
         .collect();
@@ -133,7 +134,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "lattice": lattice.cells,
             "prefilter_s": prefilter_s,
             "methods": rows,
-            "accc_over_bmcc": match (count(Method::Accc), bmcc) { (Some(x), Some(b)) => Some(x as f64 / b.max(1) as f64), _ => None },
+            "accc_over_bmcc": match (count(Method::Accc), bmcc) { (Some(x), Some(b)) if b > 0 => Some(x as f64 / b as f64), _ => None },
         });
         println!("{j}");
         return Ok(());

@@ -58,8 +58,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     held.commit()?;
     eprintln!(
-        "merged {} parts into {} ({}x{}, channels {})",
-        parts.len(),
+        "merged {} into {} ({}x{}, channels {})",
+        match parts.len() {
+            1 => "1 part".to_string(),
+            n => format!("{n} parts"),
+        },
         a.output.display(),
         whole.width,
         whole.height,

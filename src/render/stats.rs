@@ -248,7 +248,7 @@ impl RenderStats {
             ));
         }
         s.push_str(&format!(
-            "per ray: {:.2} cells visited, {:.2} solved ({:.0}% held a crossing), {:.2} cleared by curvature, {:.2} kernel evals, {:.2} root-refinement evaluations\n",
+            "per ray: {:.2} cells visited, {:.2} solved ({:.0}% held a crossing), {:.2} cleared by curvature, {:.2} kernel evals, {:.2} root-refinement evaluations (brent_iters in --stats)\n",
             c.cells_visited as f64 / rays,
             c.cells_solved as f64 / rays,
             100.0 * c.cells_with_crossing as f64 / c.cells_solved.max(1) as f64,

@@ -98,6 +98,32 @@ fn shares_above(samples: &[f32], isos: &[f64]) -> Vec<f64> {
 /// returns the midpoints between consecutive strong modes. A surface between
 /// two materials sits halfway between their typical values. `None` with
 /// fewer than two strong modes.
+/// How far `v[i]` rises above its key col: the higher of the lowest
+/// points between it and a higher value on either side, a side that meets
+/// no higher value before its end not counting (for the highest peak, the
+/// lowest value of all). A peak's topographic prominence.
+fn prominence(v: &[f64], i: usize) -> f64 {
+    // The lowest point before a higher value, if one comes.
+    let col = |side: &mut dyn Iterator<Item = usize>| {
+        let mut low = v[i];
+        for k in side {
+            if v[k] > v[i] {
+                return Some(low);
+            }
+            low = low.min(v[k]);
+        }
+        None
+    };
+    let left = col(&mut (0..i).rev());
+    let right = col(&mut (i + 1..v.len()));
+    let key = match (left, right) {
+        (Some(a), Some(b)) => a.max(b),
+        (Some(a), None) | (None, Some(a)) => a,
+        (None, None) => v.iter().copied().fold(f64::INFINITY, f64::min),
+    };
+    v[i] - key
+}
+
 fn suggest_iso(h: &Histogram) -> Option<Vec<f64>> {
     let n = h.counts.len();
     if h.max <= h.min {
@@ -133,6 +159,11 @@ fn suggest_iso(h: &Histogram) -> Option<Vec<f64>> {
             let c: u64 = h.counts[lo..=hi].iter().sum();
             c as f64 >= 0.002 * total as f64
         })
+        // And stands out: its count at least 1.2 times the deepest valley
+        // on the way to a higher mode on either side (its prominence), so
+        // the ripples of a smooth ramp (a phantom's Gaussian fringe, a
+        // scan's partial-volume shell) are not taken for materials.
+        .filter(|&i| prominence(&smooth, i) >= 1.2f64.ln())
         .collect();
     modes.dedup();
     let out: Vec<f64> = modes
@@ -145,6 +176,22 @@ fn suggest_iso(h: &Histogram) -> Option<Vec<f64>> {
 #[cfg(test)]
 mod tests {
     use crate::volume::{SampleType, Volume};
+
+    /// The paper's glass ball: background and ball in two tall modes, the
+    /// Gaussian fringe between them a ramp whose shells' ripples are no
+    /// materials. One suggestion, the midpoint.
+    #[test]
+    fn a_fringe_between_two_materials_gives_one_midpoint() {
+        let ball = crate::phantom::SphereSpec {
+            format: crate::phantom::PhantomFormat::U8,
+            ..Default::default()
+        }
+        .build()
+        .unwrap();
+        let st = ball.stats();
+        assert_eq!(st.suggested_iso, [127.5], "{:?}", st.suggested_iso);
+        assert!(st.iso_from_modes);
+    }
 
     #[test]
     fn two_materials_give_a_midpoint() {
