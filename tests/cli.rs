@@ -749,7 +749,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "a raw volume without [volume.raw]", "render {cranium} -o out.png --set volume.path={headsq}", &["--set volume.path=", "[volume.raw]", "dims", "type"]),
         bad("scene", "a raw layout for a NRRD file", "render {sphere} -o out.png --set volume.path={tooth} --set volume.raw={dims=[2,2,2],type=\"u8\"}", &["--set volume.raw=", "headerless raw volumes", "a NRRD file, whose header gives its layout"]),
         bad("scene", "--set backdrop centre beyond 1e30", "render {sphere} -o out.png --set backdrop.center=[31.5,31.5,1e300]", &["--set backdrop.center=", "±1e30"]),
-        bad("scene", "--set a checker and an image backdrop", "render {sphere} -o out.png --set backdrop.image=\"photo.jpg\"", &["backdrop"]),
+        bad("scene", "--set an image backdrop without its width", "render {sphere} -o out.png --set backdrop.image=\"photo.jpg\"", &["backdrop.width", "needs"]),
         bad("scene", "phantom over the memory limit", "render {sphere} -o out.png --set volume.phantom.size=4096", &["--set volume.phantom.size=4096:", "limit"]),
         bad("scene", "phantom beyond 4096 samples a side", "render {sphere} -o out.png --set volume.phantom.size=100000", &["--set volume.phantom.size=100000:", "from 1 to 4096"]),
         Bad {

@@ -119,7 +119,7 @@ pub enum VolumeError {
     Format { path: PathBuf, msg: String },
     #[error("{path}: {msg}")]
     Unsupported { path: PathBuf, msg: String },
-    #[error("{path}: data holds {got} bytes but the header needs {need} ({what})")]
+    #[error("{path}: data holds {got} bytes but {need} are needed ({what})")]
     Truncated {
         path: PathBuf,
         need: u64,

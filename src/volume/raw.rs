@@ -42,10 +42,21 @@ pub fn read(path: &Path, spec: &RawSpec, opts: &LoadOptions) -> Result<Volume, V
     let file = crate::input::open(path).map_err(|e| VolumeError::io(path, e))?;
     let len = file.metadata().map_err(|e| VolumeError::io(path, e))?.len();
     let [nx, ny, nz] = spec.dims;
-    // A headerless file has no header to be truncated against: a length
-    // either way is the dims' or the type's mismatch, with the dims that
-    // would fit it.
-    if len != end {
+    if len < end {
+        // Short of the dims: usually one slice too many, so with the dims
+        // the length fits, as for a file too long.
+        return Err(VolumeError::Truncated {
+            path: path.to_path_buf(),
+            need: end,
+            got: len,
+            what: format!(
+                "{nx}x{ny}x{nz} samples of {ty}{}{}",
+                offset_phrase(spec.offset),
+                fits_phrase(spec, len)
+            ),
+        });
+    }
+    if len > end {
         return Err(VolumeError::format(
             path,
             length_mismatch_message(spec, need, len),
@@ -79,18 +90,8 @@ fn length_mismatch_message(spec: &RawSpec, need: u64, len: u64) -> String {
         "dims {nx}x{ny}x{nz} of {ty} need {need} bytes{}{in_all}, but the file holds {len} bytes: the dims/type do not match the file length",
         offset_phrase(spec.offset),
     );
+    msg.push_str(&fits_phrase(spec, len));
     let avail = len.saturating_sub(spec.offset);
-    let fits = implied_dims(spec.dims, ty.size() as u64, avail);
-    if !fits.is_empty() {
-        let list: Vec<String> = fits
-            .iter()
-            .map(|d| format!("{}x{}x{}", d[0], d[1], d[2]))
-            .collect();
-        msg.push_str(&format!(
-            "; the length fits dims {} of {ty}",
-            list.join(" or ")
-        ));
-    }
     let count = (nx as u64)
         .saturating_mul(ny as u64)
         .saturating_mul(nz as u64);
@@ -102,6 +103,22 @@ fn length_mismatch_message(spec: &RawSpec, need: u64, len: u64) -> String {
         }
     }
     msg
+}
+
+/// `; the length fits dims …` for the dims that keep two of `spec`'s
+/// and fit a file of `len` bytes exactly, or nothing if none do.
+fn fits_phrase(spec: &RawSpec, len: u64) -> String {
+    let ty = spec.sample_type;
+    let avail = len.saturating_sub(spec.offset);
+    let fits = implied_dims(spec.dims, ty.size() as u64, avail);
+    if fits.is_empty() {
+        return String::new();
+    }
+    let list: Vec<String> = fits
+        .iter()
+        .map(|d| format!("{}x{}x{}", d[0], d[1], d[2]))
+        .collect();
+    format!("; the length fits dims {} of {ty}", list.join(" or "))
 }
 
 fn offset_phrase(offset: u64) -> String {
