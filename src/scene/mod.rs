@@ -278,12 +278,24 @@ impl Scene {
                 *shown = format!("--set {o}");
             }
         }
-        let de = toml::Value::Table(table);
         let key_error = |key: String, msg: String| SceneError::Key {
             path: path.to_path_buf(),
             key,
             msg,
         };
+        // `[[image]]` makes a list of tables, which serde would report as
+        // the section's first setting of the wrong type.
+        for (name, value) in &table {
+            if let toml::Value::Array(items) = value
+                && items.iter().any(|v| v.is_table())
+            {
+                return Err(key_error(
+                    name.clone(),
+                    format!("is written [[{name}]], a list of tables; a scene has one, written [{name}]"),
+                ));
+            }
+        }
+        let de = toml::Value::Table(table);
         let result = serde_path_to_error::deserialize(de)
             .map_err(|e| {
                 let key = e.path().to_string();
@@ -950,6 +962,19 @@ checker = 8.0
         };
         let e = parse_text(both, &[]).unwrap_err();
         assert!(e.to_string().contains("not both"), "{e}");
+    }
+
+    /// A section written as a list of tables is named as such, not as its
+    /// first setting of the wrong type.
+    #[test]
+    fn a_section_written_as_a_list_is_named() {
+        let e = parse_text(|s| s.replace("[image]", "[[image]]"), &[])
+            .unwrap_err()
+            .to_string();
+        assert_eq!(
+            e,
+            "test.toml: [image] is written [[image]], a list of tables; a scene has one, written [image]"
+        );
     }
 
     fn parse_text(edit: impl Fn(&str) -> String, o: &[&str]) -> Result<Scene, SceneError> {
