@@ -291,7 +291,9 @@ impl Scene {
             {
                 return Err(key_error(
                     name.clone(),
-                    format!("is written [[{name}]], a list of tables; a scene has one, written [{name}]"),
+                    format!(
+                        "is written [[{name}]], a list of tables; a scene has one, written [{name}]"
+                    ),
                 ));
             }
         }
