@@ -38,7 +38,7 @@ pub fn num(x: f64) -> String {
 }
 
 /// `x` to 4 significant digits for tables of measurements: positional
-/// from 1e-3 to below 1e6 without trailing zeros (`0.3183`, `6.391`,
+/// from 1e-3 to below 1e6 without trailing zeros (`0.2718`, `6.391`,
 /// `2072`), scientific beyond (`1.526e-5`); `0`, `inf`, `NaN` as such.
 pub fn sig4(x: f64) -> String {
     if !x.is_finite() {
@@ -103,7 +103,7 @@ mod tests {
     fn sig4_keeps_four_digits() {
         for (x, want) in [
             (0.0, "0"),
-            (0.31831, "0.3183"),
+            (0.27183, "0.2718"),
             (6.3914, "6.391"),
             (2072.4, "2072"),
             (999.96, "1000"),

@@ -150,8 +150,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
                         d.events[1],
                         fmt(d.hit[0]),
                         fmt(d.hit[1]),
-                        d.distance
-                            .map_or("-".to_string(), |v| snell::human::sig4(v as f64))
+                        d.distance.map_or("-".to_string(), snell::human::sig4)
                     );
                 }
             }
