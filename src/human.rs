@@ -57,6 +57,14 @@ pub fn sig4(x: f64) -> String {
     format!("{x:.3e}")
 }
 
+/// `n` and its noun, plural but for one: `1 part`, `3 parts`.
+pub fn count(n: usize, noun: &str) -> String {
+    match n {
+        1 => format!("1 {noun}"),
+        n => format!("{n} {noun}s"),
+    }
+}
+
 /// Three numbers as `a x b x c` with [`num`].
 pub fn triple(v: [f64; 3]) -> String {
     format!("{} x {} x {}", num(v[0]), num(v[1]), num(v[2]))

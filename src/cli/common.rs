@@ -413,8 +413,6 @@ pub fn check_distinct(outputs: &[&Path], inputs: &[&Path]) -> anyhow::Result<()>
     Ok(())
 }
 
-/// A size in MiB (as [`snell::bench::machine::peak_rss_mib`] reports the
-/// process's peak) as `1.5 GiB`.
 /// `AxBxC samples: one sample along z makes no cells` for a volume one
 /// sample thick along an axis (no cell, so no surface), else `None`.
 pub fn no_cells(d: [usize; 3]) -> Option<String> {
@@ -428,6 +426,8 @@ pub fn no_cells(d: [usize; 3]) -> Option<String> {
     ))
 }
 
+/// A size in MiB (as [`snell::bench::machine::peak_rss_mib`] reports the
+/// process's peak) as `1.5 GiB`.
 pub fn human_mib(mib: f64) -> String {
     limits::human_bytes((mib * 1048576.0) as u64)
 }

@@ -59,10 +59,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     held.commit()?;
     eprintln!(
         "merged {} into {} ({}x{}, channels {})",
-        match parts.len() {
-            1 => "1 part".to_string(),
-            n => format!("{n} parts"),
-        },
+        snell::human::count(parts.len(), "part"),
         a.output.display(),
         whole.width,
         whole.height,

@@ -130,10 +130,7 @@ pub fn resample(
     for a in 0..3 {
         let axis = ["x", "y", "z"][a];
         if dims[a] == 0 || (n[a] > 1 && dims[a] < 2) || (n[a] == 1 && dims[a] != 1) {
-            let samples = |k: usize| match k {
-                1 => "1 sample".to_string(),
-                k => format!("{k} samples"),
-            };
+            let samples = |k: usize| crate::human::count(k, "sample");
             return Err(VolumeError::Invalid(format!(
                 "a lattice of {} along {axis} for {} of input (an axis of one sample stays one; others need at least two)",
                 samples(dims[a]),

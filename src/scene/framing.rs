@@ -363,8 +363,9 @@ fn given(x: f64) -> String {
     toml_float(x, crate::human::exact)
 }
 
-/// `[x, y, z]` in the digits of `value` ([`float`] or [`given`]).
-fn vector(v: [f64; 3], value: fn(f64) -> String) -> String {
+/// `[x, y, z]` in the digits of `value` ([`float`] or [`given`], or
+/// [`crate::human::num`] in messages).
+pub(super) fn vector(v: [f64; 3], value: fn(f64) -> String) -> String {
     format!("[{}, {}, {}]", value(v[0]), value(v[1]), value(v[2]))
 }
 

@@ -172,10 +172,7 @@ pub(super) fn ignored_settings(
         .into_iter()
         .filter_map(|(key, why)| {
             let (_, value) = written.iter().find(|(k, _)| k == key)?;
-            Some(match value.strip_prefix("--set ") {
-                Some(_) => format!("{value} is ignored: {why}"),
-                None => format!("[{key}] = {value} is ignored: {why}"),
-            })
+            Some(format!("{} is ignored: {why}", as_written(key, value)))
         })
         .collect()
 }
@@ -197,18 +194,21 @@ fn tilted_u_axis(
     if off <= 1e-6 {
         return None;
     }
-    let shown = match value.strip_prefix("--set ") {
-        Some(_) => value.clone(),
-        None => format!("[backdrop.u_axis] = {value}"),
-    };
     Some(format!(
-        "{shown} is not in the backdrop's plane ({:.3}° out of it): its projection onto the plane, {}, is the u axis",
+        "{} is not in the backdrop's plane ({:.3}° out of it): its projection onto the plane, {}, is the u axis",
+        as_written("backdrop.u_axis", value),
         off.min(1.0).asin().to_degrees(),
-        {
-            let [x, y, z] = u_axis.to_array().map(crate::human::num);
-            format!("[{x}, {y}, {z}]")
-        }
+        super::framing::vector(u_axis.to_array(), crate::human::num)
     ))
+}
+
+/// A written setting as a note names it: the `--set` that wrote it, or
+/// `[key] = value` from the file.
+fn as_written(key: &str, value: &str) -> String {
+    match value.strip_prefix("--set ") {
+        Some(_) => value.to_string(),
+        None => format!("[{key}] = {value}"),
+    }
 }
 
 /// A `[render]` setting that some traversals or anti-aliasing modes do not
