@@ -8,53 +8,43 @@
 //! 22 characters and 1e300 as 301). JSON goes through `serde_json`, which
 //! already writes the shortest round trip.
 
-/// Significant digits of [`num`].
-const DIGITS: i32 = 7;
-
 /// `x` for people: up to 7 significant digits without trailing zeros,
 /// positional from 1e-4 to below 1e7, scientific beyond (`1.523944e-29`,
 /// `1e308`); `inf`, `-inf`, `NaN` as such.
 pub fn num(x: f64) -> String {
-    if !x.is_finite() {
-        return x.to_string();
-    }
-    if x == 0.0 {
-        return "0".into();
-    }
-    let mag = x.abs();
-    if (1e-4..1e7).contains(&mag) {
-        let exp = mag.log10().floor() as i32;
-        let decimals = (DIGITS - 1 - exp).max(0) as usize;
-        let s = format!("{x:.decimals$}");
-        // Rounding can carry to a new digit (9999999.6 → 10000000): still
-        // one more digit than asked at most, and exact.
-        return trim_fraction(&s);
-    }
-    let s = format!("{x:.prec$e}", prec = (DIGITS - 1) as usize);
-    match s.split_once('e') {
-        Some((mantissa, exp)) => format!("{}e{exp}", trim_fraction(mantissa)),
-        None => s,
-    }
+    significant(x, 7, 1e-4..1e7)
 }
 
 /// `x` to 4 significant digits for tables of measurements: positional
 /// from 1e-3 to below 1e6 without trailing zeros (`0.2718`, `6.391`,
 /// `2072`), scientific beyond (`1.526e-5`); `0`, `inf`, `NaN` as such.
 pub fn sig4(x: f64) -> String {
+    significant(x, 4, 1e-3..1e6)
+}
+
+/// `x` to `digits` significant digits without trailing zeros, positional
+/// when its rounded magnitude lies in `positional`, scientific otherwise.
+/// Rounded first, so 999.96 at 4 digits counts as the 1000 it prints as
+/// and 9999999.6 at 7 as the `1e7` beyond the positional range.
+fn significant(x: f64, digits: usize, positional: std::ops::Range<f64>) -> String {
     if !x.is_finite() {
         return x.to_string();
     }
     if x == 0.0 {
         return "0".into();
     }
-    // Rounded to 4 digits first, so 999.96 counts as the 1000 it prints as.
-    let rounded: f64 = format!("{x:.3e}").parse().unwrap_or(x);
-    if (1e-3..1e6).contains(&rounded.abs()) {
+    let prec = digits - 1;
+    let sci = format!("{x:.prec$e}");
+    let rounded: f64 = sci.parse().unwrap_or(x);
+    if positional.contains(&rounded.abs()) {
         let exp = rounded.abs().log10().floor() as i32;
-        let decimals = (3 - exp).max(0) as usize;
+        let decimals = (prec as i32 - exp).max(0) as usize;
         return trim_fraction(&format!("{rounded:.decimals$}"));
     }
-    format!("{x:.3e}")
+    match sci.split_once('e') {
+        Some((mantissa, exp)) => format!("{}e{exp}", trim_fraction(mantissa)),
+        None => sci,
+    }
 }
 
 /// `n` and its noun, plural but for one: `1 part`, `3 parts`.
@@ -118,7 +108,8 @@ mod tests {
             (0.5, "0.5"),
             (1.526e-5, "1.526e-5"),
             (-3.2741e4, "-32740"),
-            (1.5e6, "1.500e6"),
+            (1.5e6, "1.5e6"),
+            (-1.52649e-5, "-1.526e-5"),
             (f64::NAN, "NaN"),
         ] {
             assert_eq!(sig4(x), want, "{x}");
@@ -136,6 +127,8 @@ mod tests {
         assert_eq!(num(-3.848773152033876e-15), "-3.848773e-15");
         assert_eq!(num(1e308), "1e308");
         assert_eq!(num(12345678.0), "1.234568e7");
+        assert_eq!(num(9999999.6), "1e7");
+        assert_eq!(num(9999999.4), "9999999");
         assert_eq!(num(0.00012345678), "0.0001234568");
         assert_eq!(num(f64::INFINITY), "inf");
         assert_eq!(num(f64::NAN), "NaN");

@@ -36,6 +36,13 @@ pub fn open(path: &Path) -> io::Result<File> {
     Ok(file)
 }
 
+/// Whether `path`'s name ends in `.ext` in any case (`.EXR` too): the
+/// readers that choose a format by name, or word a message by it, ask this.
+pub fn has_extension(path: &Path, ext: &str) -> bool {
+    path.extension()
+        .is_some_and(|e| e.eq_ignore_ascii_case(ext))
+}
+
 /// Reads a whole input file as UTF-8 text (a scene).
 pub fn read_to_string(path: &Path) -> io::Result<String> {
     let mut text = String::new();

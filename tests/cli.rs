@@ -307,29 +307,45 @@ fn iso_outside_the_data_is_a_warning_and_a_backdrop_image() {
 }
 
 /// A volume one sample thick has no cells: the render completes, showing
-/// the backdrop, and says why.
+/// the backdrop through the volume's plane, and says why. The control, the
+/// same plane behind a layer of 0 (two samples thick), refracts in the same
+/// view, so the camera does face the plane.
 #[test]
 fn a_volume_one_sample_thick_is_a_warning_and_a_backdrop_image() {
     let t = Tmp::new("flat");
-    let flat = t.write(
-        "flat.nrrd",
-        &nrrd(
-            "type: uint8\ndimension: 3\nsizes: 8 6 1\nencoding: raw\n",
-            &[200; 48],
-        ),
-    );
-    let o = ok(t.run(&format!(
-        "render {{sphere}} -o f.png --set volume.path={} -q --hits f.exr \
-         --set image.width=16 --set image.height=16",
-        flat.display()
-    )));
+    let render = |name: &str, sizes: &str, data: &[u8]| {
+        let path = t.write(
+            &format!("{name}.nrrd"),
+            &nrrd(
+                &format!("type: uint8\ndimension: 3\nsizes: {sizes}\nencoding: raw\n"),
+                data,
+            ),
+        );
+        let o = ok(t.run(&format!(
+            "render {{sphere}} -o {name}.png --set volume.path={} -q --hits {name}.exr \
+             --set image.width=16 --set image.height=16 --set camera.position=[3.5,2.5,-50] \
+             --set camera.look_at=[3.5,2.5,0] --set camera.fov_y=5",
+            path.display()
+        )));
+        let h = snell::film::HitImage::read_exr(&t.path(&format!("{name}.exr"))).unwrap();
+        (stderr(&o), h)
+    };
+    let (err, flat) = render("flat", "8 6 1", &[200; 48]);
     assert!(
-        stderr(&o).contains("the volume is 8x6x1 samples: one sample along z makes no cells"),
-        "{}",
-        stderr(&o)
+        err.contains("the volume is 8x6x1 samples: one sample along z makes no cells"),
+        "{err}"
     );
-    let h = snell::film::HitImage::read_exr(&t.path("f.exr")).unwrap();
-    assert!(h.events.iter().all(|&e| e == 0.0));
+    assert!(flat.events.iter().all(|&e| e == 0.0));
+    assert!(
+        flat.u.iter().all(|u| u.is_finite()),
+        "every ray meets the backdrop"
+    );
+    let layered: Vec<u8> = [[0; 48], [200; 48]].concat();
+    let (_, control) = render("control", "8 6 2", &layered);
+    assert!(
+        control.events.iter().all(|&e| e > 0.0),
+        "the two-sample slab refracts every ray"
+    );
 }
 
 /// One bad input for `snell`: what it is, the arguments (run in the test's
@@ -649,6 +665,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "--orbit with a bad frame number", "render {sphere} -o f%3d.png --orbit 8", &["%0Nd", "got %3d"]),
         bad("flag", "--orbit patterns meeting", "render {sphere} -o f%d.png --hits h%d.exr --exr h%02d.exr --orbit 12", &["--hits h%d.exr (frame 10)", "--exr h%02d.exr (frame 10)", "h10.exr"]),
         bad("flag", "--orbit with --trace", "render {sphere} -o f%d.png --orbit 8 --trace t.json", &["--trace", "--orbit"]),
+        bad("flag", "--orbit with a frame pattern for --stats", "render {sphere} -o f%d.png --orbit 2 --stats s%d.json", &["--stats s%d.json", "one file", "plain name"]),
         bad("flag", "--orbit 0", "render {sphere} -o f%d.png --orbit 0", &["--orbit", "must be from 1 to 3600"]),
         bad("file", "merge: a part that is not an EXR", "merge empty.nrrd -o out.exr", &["empty.nrrd", "OpenEXR"]),
         bad("flag", "--threads 0", "render {sphere} -o out.png --threads 0", &["--threads"]),

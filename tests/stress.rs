@@ -435,32 +435,39 @@ fn cases() -> Vec<Case> {
             },
         ),
         (
-            "rays in the tangent plane of a planar surface (f = y, iso 20 = a sample row; rays at y = 20, 20 +- 1e-9)",
+            "rays in the tangent plane of a planar surface (f = y, iso 20 = a sample row; rows of rays at y = 20 and 20 +- 1e-9)",
             "touching is not crossing: 0 events, every ray reaches the backdrop",
             || {
-                let vol = || volume([64; 3], |_, y, _| y);
-                let mut out = Vec::new();
-                for y in ["20.0", "20.000000001", "19.999999999"] {
-                    let pos = format!("camera.position=[31.5, {y}, -100.0]");
-                    let at = format!("camera.look_at=[31.5, {y}, 31.5]");
-                    let f = render(
-                        &sphere(
-                            16,
-                            &[
-                                "surface.iso=20.0",
-                                "camera.kind=\"orthographic\"",
-                                "camera.height=1e-6",
-                                &pos,
-                                &at,
-                            ],
-                        ),
-                        Some(vol()),
-                    );
-                    assert!(f.film.events.iter().all(|&e| e == 0.0));
-                    assert!(f.film.u.iter().all(|u| u.is_finite()));
-                    out.push(format!("y={y}: 0 events"));
+                // Three rows of an orthographic camera 3e-9 high: pixel
+                // centres at sy = 2/3, 0, -2/3 of its half height, so the
+                // middle row lies in the plane y = 20 and the others 1e-9
+                // off it.
+                let s = sphere(
+                    16,
+                    &[
+                        "image.height=3",
+                        "surface.iso=20.0",
+                        "camera.kind=\"orthographic\"",
+                        "camera.height=3e-9",
+                        "camera.position=[31.5, 20.0, -100.0]",
+                        "camera.look_at=[31.5, 20.0, 31.5]",
+                    ],
+                );
+                let rows: Vec<f64> = (0..3)
+                    .map(|r| s.camera.ray(8.5, r as f64 + 0.5).0.y - 20.0)
+                    .collect();
+                assert_eq!(rows[1], 0.0, "the middle row lies in the plane");
+                for off in [rows[0], rows[2]] {
+                    assert!((off.abs() - 1e-9).abs() < 1e-12, "rows {rows:?}");
                 }
-                out.join(", ")
+                let f = render(&s, Some(volume([64; 3], |_, y, _| y)));
+                assert_eq!(f.film.events.len(), 48);
+                assert!(f.film.events.iter().all(|&e| e == 0.0));
+                assert!(f.film.u.iter().all(|u| u.is_finite()));
+                format!(
+                    "rows at y = 20 {:+.1e}, 20, 20 {:+.1e}: 0 events on all 48 pixels",
+                    rows[0], rows[2]
+                )
             },
         ),
         (
@@ -740,20 +747,61 @@ fn cases() -> Vec<Case> {
             },
         ),
         (
-            "1xNxM, Nx1xM and NxMx1 volumes (no interior), bspline3",
-            "backdrop only: no event, every ray hits the backdrop",
+            "1xNxM, Nx1xM and NxMx1 volumes (no interior; a disk of 1 in 0 in the plane), bspline3, seen face on",
+            "backdrop only: no event, every ray hits the backdrop; the disk behind a layer of 0 (two samples thick) refracts",
             || {
                 let mut out = Vec::new();
-                for dims in [[1, 16, 16], [16, 1, 16], [16, 16, 1]] {
-                    let vol =
-                        Volume::new(dims, [1.0; 3], SampleType::U8, vec![200.0; 256]).unwrap();
-                    let f = render(&sphere(32, &["surface.iso=100.0"]), Some(vol));
-                    assert_eq!(
-                        f.stats.counters.refractions + f.stats.counters.reflections,
-                        0
-                    );
-                    assert!(f.film.u.iter().all(|u| u.is_finite()));
-                    out.push(format!("{}x{}x{}: 0 events", dims[0], dims[1], dims[2]));
+                for axis in 0..3 {
+                    // The camera on the slab's axis, 50 units before it, the
+                    // backdrop 100 behind.
+                    let at = |d: f64| {
+                        let mut p = [7.5; 3];
+                        p[axis] = d;
+                        format!("[{:.1}, {:.1}, {:.1}]", p[0], p[1], p[2])
+                    };
+                    let mut n = [0.0; 3];
+                    n[axis] = -1.0;
+                    let normal = format!("[{:.1}, {:.1}, {:.1}]", n[0], n[1], n[2]);
+                    let (up, u) = if axis == 1 {
+                        ("[0.0, 0.0, 1.0]", "[1.0, 0.0, 0.0]")
+                    } else {
+                        ("[0.0, 1.0, 0.0]", "[0.0, 1.0, 0.0]")
+                    };
+                    let sets = [
+                        format!("camera.position={}", at(-50.0)),
+                        format!("camera.look_at={}", at(0.0)),
+                        format!("camera.up={up}"),
+                        format!("backdrop.center={}", at(100.0)),
+                        format!("backdrop.normal={normal}"),
+                        format!("backdrop.u_axis={u}"),
+                    ];
+                    let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
+                    let s = sphere(32, &sets);
+                    let slab = |thickness: usize| {
+                        let mut dims = [16; 3];
+                        dims[axis] = thickness;
+                        let f = volume(dims, |x, y, z| {
+                            let p = [x, y, z];
+                            let r2: f64 = (0..3)
+                                .filter(|&a| a != axis)
+                                .map(|a| (p[a] - 7.5).powi(2))
+                                .sum();
+                            let back = p[axis] as usize + 1 == thickness;
+                            if back && r2 < 36.0 { 1.0 } else { 0.0 }
+                        });
+                        render(&s, Some(f))
+                    };
+                    let flat = slab(1);
+                    let c = flat.stats.counters;
+                    assert_eq!(c.refractions + c.reflections, 0, "axis {axis}");
+                    assert!(flat.film.u.iter().all(|u| u.is_finite()), "axis {axis}");
+                    let control = slab(2).stats.counters;
+                    assert!(control.refractions > 0, "axis {axis}: {control:?}");
+                    let dims = ["1x16x16", "16x1x16", "16x16x1"][axis];
+                    out.push(format!(
+                        "{dims}: 0 events ({} refractions two samples thick)",
+                        control.refractions
+                    ));
                 }
                 out.join(", ")
             },

@@ -254,20 +254,23 @@ pub fn filter_kind(filter: &str, lambda: Option<f64>) -> anyhow::Result<FilterKi
 /// not use each said in a warning (a `render.step` under an octree, say):
 /// every command that reads a scene names them alike.
 pub fn load_scene(path: &Path, sets: &[String]) -> anyhow::Result<snell::scene::Scene> {
-    Ok(warn_ignored(path, snell::scene::Scene::load(path, sets)?))
+    Ok(warn_setting_notes(
+        path,
+        snell::scene::Scene::load(path, sets)?,
+    ))
 }
 
 /// [`load_scene`] for one part of a frame (`render --region`), held to the
 /// memory limit for its part alone ([`snell::scene::Scene::load_part`]).
 pub fn load_scene_part(path: &Path, sets: &[String]) -> anyhow::Result<snell::scene::Scene> {
-    Ok(warn_ignored(
+    Ok(warn_setting_notes(
         path,
         snell::scene::Scene::load_part(path, sets)?,
     ))
 }
 
-fn warn_ignored(path: &Path, scene: snell::scene::Scene) -> snell::scene::Scene {
-    for w in scene.ignored_settings() {
+fn warn_setting_notes(path: &Path, scene: snell::scene::Scene) -> snell::scene::Scene {
+    for w in scene.setting_notes() {
         eprintln!("warning: {}: {w}", path.display());
     }
     scene

@@ -8,6 +8,7 @@ use clap::Args as ClapArgs;
 use snell::compare::compare_hits;
 use snell::film::HitImage;
 use snell::film::metrics::{RgbImage, compare_images, diff_image};
+use snell::input::has_extension;
 use snell::scene::Scene;
 
 use super::common::{MemoryLimit, check_distinct, check_format, check_output};
@@ -42,7 +43,7 @@ pub struct Args {
 /// image (PNG, JPEG, or an EXR without the hit channels). An EXR that does
 /// not read is an error here, with the reader's reason.
 fn read_hits(p: &Path) -> anyhow::Result<Option<(HitImage, [i32; 2])>> {
-    if !p.extension().is_some_and(|e| e.eq_ignore_ascii_case("exr")) {
+    if !has_extension(p, "exr") {
         return Ok(None);
     }
     Ok(HitImage::read_exr_if_hits(p)?)
@@ -59,10 +60,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let (hit_a, hit_b) = (hits_a.is_some(), hits_b.is_some());
     if hit_a != hit_b {
         let (hit, other) = if hit_a { (&a.a, &a.b) } else { (&a.b, &a.a) };
-        let what = if other
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("exr"))
-        {
+        let what = if has_extension(other, "exr") {
             "an EXR without u, v, events channels, a colour image"
         } else {
             "not an EXR"

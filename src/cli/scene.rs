@@ -218,7 +218,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "internal error, please report it: the drafted scene does not read back: {e}"
         )
     })?;
-    debug_assert!(scene.ignored_settings().is_empty());
+    debug_assert!(scene.setting_notes().is_empty());
     snell::atomic::write_atomic(&a.output, |w| {
         use std::io::Write;
         w.write_all(text.as_bytes())

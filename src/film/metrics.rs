@@ -26,10 +26,7 @@ impl RgbImage {
             path: path.to_path_buf(),
             msg,
         };
-        let is_exr = path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("exr"));
-        if is_exr {
+        if crate::input::has_extension(path, "exr") {
             let image = read_exr_layer(path).map_err(err)?;
             let layer = &image.layer_data;
             let ch = |name: &str| -> Result<Vec<f32>, FilmError> {

@@ -648,6 +648,21 @@ mod tests {
         // At the grid centre (0,0,0): (1 - 0 + α(1 + cos(2π·6·1)))/(2(1+α)) = (1+2α)/(2+2α).
         let c = v.get(20, 20, 20) as f64;
         assert!((c - 1.5 / 2.5).abs() < 1e-6, "{c}");
+        // Off the centre, where every term counts: grid g ↦ -1 + 2g/40, the
+        // ripple cos(2π·6·cos(πr/2)) of r = √(x² + y²), the slope -sin(πz/2).
+        use std::f64::consts::PI;
+        for (g, (x, y, z)) in [
+            ([30, 20, 25], (0.5, 0.0, 0.25)),
+            ([10, 35, 5], (-0.5, 0.75, -0.75)),
+            ([0, 40, 38], (-1.0, 1.0, 0.9)),
+        ] {
+            let r = f64::hypot(x, y);
+            let want = (1.0 - (PI * z / 2.0).sin()
+                + 0.25 * (1.0 + (12.0 * PI * (PI * r / 2.0).cos()).cos()))
+                / 2.5;
+            let got = v.get(g[0], g[1], g[2]) as f64;
+            assert!((got - want).abs() < 1e-6, "{g:?}: {got} against {want}");
+        }
         let (lo, hi) = v
             .samples()
             .iter()

@@ -595,7 +595,7 @@ mod tests {
             let text = d.to_toml();
             let scene = Scene::parse(&text, Path::new("/tmp/scenes/x.toml"), &[])
                 .unwrap_or_else(|e| panic!("{e}\n{text}"));
-            assert!(scene.ignored_settings().is_empty(), "{text}");
+            assert!(scene.setting_notes().is_empty(), "{text}");
             assert_eq!((scene.width, scene.height), (640, 480));
             assert_eq!(scene.surface.filter, filter);
             // What the user gave reads back to the last bit.

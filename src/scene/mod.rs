@@ -153,8 +153,9 @@ pub struct Scene {
     pub backdrop_image: Option<PathBuf>,
     pub render: RenderSettings,
     /// Settings the scene file or `--set` wrote that this scene does not
-    /// use, one message each (see [`Scene::ignored_settings`]).
-    ignored: Vec<String>,
+    /// use or uses otherwise than written, one message each (see
+    /// [`Scene::setting_notes`]).
+    notes: Vec<String>,
     /// The `--set` overrides it was read with, to name one as the cause of
     /// an error found later (in [`Scene::load_volume`]).
     overrides: Vec<String>,
@@ -175,8 +176,8 @@ impl Scene {
     /// with a filter that does not smooth; and one setting used otherwise
     /// than written: a `backdrop.u_axis` out of the backdrop's plane, whose
     /// projection onto it is used.
-    pub fn ignored_settings(&self) -> &[String] {
-        &self.ignored
+    pub fn setting_notes(&self) -> &[String] {
+        &self.notes
     }
 
     /// The files the scene reads: its own, its volume file and its
@@ -224,9 +225,7 @@ impl Scene {
                 }
             }
         })?;
-        let toml_named = path
-            .extension()
-            .is_some_and(|e| e.eq_ignore_ascii_case("toml"));
+        let toml_named = crate::input::has_extension(path, "toml");
         let scene = Scene::parse_unchecked(&text, path, overrides).map_err(|e| match e {
             SceneError::Syntax { path, msg } if !toml_named => SceneError::Syntax {
                 path,
@@ -938,11 +937,7 @@ checker = 8.0
         let photo_path = concat!(env!("CARGO_MANIFEST_DIR"), "/scenes/photo.jpg");
         let set_photo = format!("backdrop.image={photo_path}");
         let s = parse(&[&set_photo, "backdrop.width=100.0"]).unwrap();
-        assert!(
-            s.ignored_settings().is_empty(),
-            "{:?}",
-            s.ignored_settings()
-        );
+        assert!(s.setting_notes().is_empty(), "{:?}", s.setting_notes());
         assert!(s.backdrop_image.is_some());
         let photo = |t: &str| {
             t.replace(
@@ -1109,7 +1104,7 @@ checker = 8.0
     /// settings are not.
     #[test]
     fn ignored_settings_are_the_written_unused_ones() {
-        assert!(parse(&[]).unwrap().ignored_settings().is_empty());
+        assert!(parse(&[]).unwrap().setting_notes().is_empty());
         let s = parse(&[
             "camera.height=3",
             "backdrop.width=2",
@@ -1120,7 +1115,7 @@ checker = 8.0
             "surface.lambda=1",
         ])
         .unwrap();
-        let ignored = s.ignored_settings();
+        let ignored = s.setting_notes();
         assert_eq!(ignored.len(), 7, "{ignored:?}");
         assert!(
             ignored[0].starts_with("--set camera.height=3 is ignored"),
@@ -1130,7 +1125,7 @@ checker = 8.0
         // in errors.
         let s = parse(&["render={seed=7}"]).unwrap();
         assert_eq!(
-            s.ignored_settings(),
+            s.setting_notes(),
             [
                 "--set render={seed=7} is ignored: render.supersampling is \"none\" (one ray per pixel); it is read by jitter"
             ]
@@ -1141,8 +1136,8 @@ checker = 8.0
             &[],
         )
         .unwrap();
-        assert_eq!(s.ignored_settings().len(), 1);
-        assert!(s.ignored_settings()[0].starts_with("[camera.height] = 5.0 is ignored"));
+        assert_eq!(s.setting_notes().len(), 1);
+        assert!(s.setting_notes()[0].starts_with("[camera.height] = 5.0 is ignored"));
         // Used: the smoothing spline's lambda, the step of step traversal,
         // footprint settings with footprint supersampling.
         let s = parse(&[
@@ -1156,23 +1151,15 @@ checker = 8.0
             "render.classify=none",
         ])
         .unwrap();
-        assert!(
-            s.ignored_settings().is_empty(),
-            "{:?}",
-            s.ignored_settings()
-        );
+        assert!(s.setting_notes().is_empty(), "{:?}", s.setting_notes());
         // A u axis out of the plane is projected, and said to be; its
         // length and a rounding error's tilt are not worth a word.
         let s = parse(&["backdrop.u_axis=[2.0, 0.0, 1e-9]"]).unwrap();
-        assert!(
-            s.ignored_settings().is_empty(),
-            "{:?}",
-            s.ignored_settings()
-        );
+        assert!(s.setting_notes().is_empty(), "{:?}", s.setting_notes());
         assert_eq!(s.backdrop.u_axis, DVec3::X);
         let s = parse(&["backdrop.u_axis=[1.0, 0.0, 1.0]"]).unwrap();
         assert_eq!(
-            s.ignored_settings(),
+            s.setting_notes(),
             [
                 "--set backdrop.u_axis=[1.0, 0.0, 1.0] is not in the backdrop's plane (45.000° out of it): its projection onto the plane, [1, 0, 0], is the u axis"
             ]
@@ -1243,7 +1230,7 @@ checker = 8.0
         // The settings reported, in any order.
         let ignored = |o: &[&str]| -> Vec<String> {
             let s = parse(o).unwrap();
-            let mut keys: Vec<String> = (s.ignored_settings().iter())
+            let mut keys: Vec<String> = (s.setting_notes().iter())
                 .map(|m| m.split(" is ignored").next().unwrap().replace("--set ", ""))
                 .collect();
             keys.sort();

@@ -113,7 +113,7 @@ pub(super) fn phantom_spec(v: toml::Value) -> Result<PhantomSpec, (String, Strin
 }
 
 /// The settings in `written` that the resolved scene does not use, as
-/// messages (see [`Scene::ignored_settings`]).
+/// messages (see [`Scene::setting_notes`]).
 pub(super) fn ignored_settings(
     written: &[(String, String)],
     f: &SceneFile,
@@ -743,15 +743,15 @@ pub(super) fn resolve(
         skip_clear_segments: r.skip_clear_segments,
     };
 
-    let mut ignored = ignored_settings(written, &f, &surface, &render);
-    ignored.extend(tilted_u_axis(
+    let mut notes = ignored_settings(written, &f, &surface, &render);
+    notes.extend(tilted_u_axis(
         written,
         u_raw,
         backdrop.normal,
         backdrop.u_axis,
     ));
     let scene = Scene {
-        ignored,
+        notes,
         overrides: Vec::new(),
         written: Vec::new(),
         file_keys: Vec::new(),
