@@ -254,4 +254,76 @@ mod tests {
         assert!((t - 2.0).abs() < 1e-12);
         assert!(first_hit(DVec3::new(0.0, 3.0, -5.0), DVec3::Z, &b, false).is_none());
     }
+
+    /// The glass sphere scene's backdrop (z = 200, u along x), and one ball of
+    /// radius 20 at (31.5, 31.5, 31.5) with optional holes.
+    fn ball(n: f64, holes: &[(DVec3, f64)], max_events: u32) -> (Scene, Reference) {
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("scenes/sphere-f32.toml");
+        let scene = Scene::load(&path, &[]).unwrap();
+        let centre = DVec3::splat(31.5);
+        let mut balls = vec![Ball {
+            center: centre,
+            radius: 20.0,
+            solid: true,
+        }];
+        balls.extend(holes.iter().map(|&(c, r)| Ball {
+            center: centre + c,
+            radius: r,
+            solid: false,
+        }));
+        let r = Reference {
+            balls,
+            ior_inside: n,
+            ior_outside: 1.0,
+            max_events,
+            approximate_holes: 0,
+        };
+        (scene, r)
+    }
+
+    /// A ray parallel to the axis at impact parameter `b` through a ball of
+    /// radius R and index n is turned by 2(asin(b/R) − asin(b/(nR))) towards
+    /// the axis, leaving from the far end of a chord 2R·cos(asin(b/(nR)))
+    /// long: the backdrop hit by plane geometry, against the reference's
+    /// vector tracing.
+    #[test]
+    fn a_ball_deflects_rays_as_the_closed_form_says() {
+        let (scene, reference) = ball(1.5, &[], 32);
+        let (r, n, z_backdrop) = (20.0f64, 1.5f64, 200.0 - 31.5);
+        for b in [0.0, 1.0, 7.5, 13.0, 19.0] {
+            let o = DVec3::new(31.5 + b, 31.5, -100.0);
+            let (hit, events) = reference.trace(&scene, o, DVec3::Z);
+            let (u, v) = hit.unwrap_or_else(|| panic!("b = {b}: no backdrop hit"));
+            assert_eq!(events, 2, "b = {b}");
+            // In the ball's frame, x across and z along the ray.
+            let (t1, t2) = ((b / r).asin(), (b / (n * r)).asin());
+            let turn = t1 - t2;
+            let entry = (b, -(r * r - b * b).sqrt());
+            let chord = 2.0 * r * t2.cos();
+            let exit = (entry.0 - chord * turn.sin(), entry.1 + chord * turn.cos());
+            let want = exit.0 - (z_backdrop - exit.1) * (2.0 * turn).tan();
+            assert!(
+                (u - want).abs() < 1e-9 * (1.0 + want.abs()),
+                "b = {b}: u {u} against {want}"
+            );
+            assert!(v.abs() < 1e-9, "b = {b}: v {v}");
+        }
+        // Outside the ball: no event, straight on.
+        let (hit, events) = reference.trace(&scene, DVec3::new(52.0, 31.5, -100.0), DVec3::Z);
+        assert_eq!((events, hit.map(|h| h.0)), (0, Some(52.0 - 31.5)));
+    }
+
+    /// Through a hole's centre along the axis: four interfaces at normal
+    /// incidence, undeviated; `max_events` 3 stops the ray without a hit.
+    #[test]
+    fn a_hole_on_the_axis_adds_two_straight_events() {
+        let (scene, reference) = ball(1.5, &[(DVec3::ZERO, 5.0)], 32);
+        let o = DVec3::new(31.5, 31.5, -100.0);
+        let (hit, events) = reference.trace(&scene, o, DVec3::Z);
+        assert_eq!(events, 4);
+        let (u, v) = hit.unwrap();
+        assert!(u.abs() < 1e-12 && v.abs() < 1e-12, "{u} {v}");
+        let (_, stopped) = ball(1.5, &[(DVec3::ZERO, 5.0)], 3);
+        assert_eq!(stopped.trace(&scene, o, DVec3::Z), (None, 3));
+    }
 }

@@ -1038,6 +1038,23 @@ pub fn prefetch<T>(x: &T) {
     let _ = x;
 }
 
+/// In a test of one instruction set's kernels: whether they `run` on this
+/// CPU. When they do not, the test is skipped, and says so on stderr; with
+/// `SNELL_REQUIRE_AVX512` set (CI sets it where the CPU reports AVX-512) it
+/// fails instead, so a detection that wrongly turned the wide kernels off
+/// cannot pass for a test that checked them.
+#[cfg(test)]
+pub(crate) fn kernels_run(what: &str, run: bool) -> bool {
+    if !run {
+        assert!(
+            std::env::var_os("SNELL_REQUIRE_AVX512").is_none(),
+            "{what}: cannot run on this CPU (or under SNELL_ISA), and SNELL_REQUIRE_AVX512 asks for it"
+        );
+        eprintln!("skipped: {what} cannot run on this CPU (or under SNELL_ISA)");
+    }
+    run
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -1124,21 +1124,38 @@ fn scene_frames_a_volume_that_renders() {
 }
 
 /// Volumes with an axis of one or two samples (no cells, or one layer of
-/// them) render with every traversal: a backdrop, not a panic.
+/// them), in the camera's view, render with every traversal: not a panic,
+/// and the same hits from each, every ray meeting the backdrop.
 #[test]
 fn thin_volumes_render_with_every_traversal() {
     let t = Tmp::new("thin");
     for size in [1, 2] {
+        let mut first: Option<Vec<u8>> = None;
         for traversal in ["step", "dda", "octree", "distance"] {
             let o = t.run(&format!(
-                "render {{sphere}} -q -o out.png --set image.width=16 --set image.height=16 \
-                 --set volume.phantom.size={size} --set render.traversal={traversal}"
+                "render {{sphere}} -q -o out.png --hits out.exr --set image.width=16 \
+                 --set image.height=16 --set volume.phantom.size={size} \
+                 --set render.traversal={traversal} --set camera.position=[0.5,0.5,-20] \
+                 --set camera.look_at=[0.5,0.5,0.5] --set camera.fov_y=5"
             ));
             assert!(
                 o.status.success(),
                 "size {size}, {traversal}: {}",
                 stderr(&o)
             );
+            let h = snell::film::HitImage::read_exr(&t.path("out.exr")).unwrap();
+            assert!(
+                h.u.iter().all(|u| u.is_finite()),
+                "size {size}, {traversal}"
+            );
+            let bytes = std::fs::read(t.path("out.exr")).unwrap();
+            match &first {
+                None => first = Some(bytes),
+                Some(f) => assert!(
+                    *f == bytes,
+                    "size {size}: {traversal}'s hits differ from step's"
+                ),
+            }
         }
     }
 }
@@ -1282,13 +1299,26 @@ fn instruction_sets_give_the_same_bits() {
                 .cmd(&format!(
                     "render {} -q -o {isa}.png --hits {isa}.exr --exr {isa}-c.exr \
                      --set image.width=64 --set image.height=64 --set surface.filter={filter} \
-                     --set surface.lambda=0 --set render.supersampling=prss",
+                     --set surface.lambda=0 --set render.supersampling=prss --stats {isa}.json",
                     teapot.display()
                 ))
                 .env("SNELL_ISA", isa)
                 .output()
                 .unwrap();
             assert!(o.status.success(), "{filter} {isa}: {}", stderr(&o));
+            // The level asked for ran, or the CPU lacks it (then the
+            // comparison is weaker, and says so; CI on an AVX-512 CPU
+            // requires it).
+            let stats: serde_json::Value =
+                serde_json::from_slice(&std::fs::read(t.path(&format!("{isa}.json"))).unwrap())
+                    .unwrap();
+            let ran = stats["isa"].as_str().unwrap();
+            let here = (snell::simd::Isa::available().iter()).any(|i| i.name().starts_with(isa));
+            if here || std::env::var_os("SNELL_REQUIRE_AVX512").is_some() {
+                assert!(ran.starts_with(isa), "{filter}: {isa} asked, {ran} ran");
+            } else {
+                eprintln!("this CPU cannot run {isa}: compared {ran} in its place");
+            }
             let files: Vec<Vec<u8>> = ["png", "exr"]
                 .iter()
                 .map(|e| std::fs::read(t.path(&format!("{isa}.{e}"))).unwrap())

@@ -243,10 +243,17 @@ fn trilinear_gradient_bound_is_exact_and_tricubic_estimate_covers_the_field() {
 // ---------------------------------------------------------------------------
 // With POV-Ray.
 
+/// Whether POV-Ray runs here; the test is skipped, saying so, when it does
+/// not, and fails with `SNELL_REQUIRE_POVRAY` set (CI sets it once it has
+/// installed POV-Ray, so a detection that missed it cannot pass).
 fn povray_or_skip(test: &str) -> bool {
     if povray::installed() {
         return true;
     }
+    assert!(
+        std::env::var_os("SNELL_REQUIRE_POVRAY").is_none(),
+        "{test}: povray is not found, and SNELL_REQUIRE_POVRAY asks for it"
+    );
     eprintln!("skipping {test}: povray is not installed (apt-get install povray)");
     false
 }

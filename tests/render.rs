@@ -150,9 +150,10 @@ fn dda_and_dense_step_agree_and_dda_never_misses() {
         .count();
     eprintln!("events differ on {differ} of {n} pixels; step found more on {step_found_more}");
     assert!(differ as f64 <= 0.002 * n as f64, "{differ} of {n}");
-    assert!(
-        step_found_more as f64 <= 0.001 * n as f64,
-        "{step_found_more} of {n}"
+    // A crossing the dense march finds, the cell-by-cell solve finds too.
+    assert_eq!(
+        step_found_more, 0,
+        "the step found more events on {step_found_more} of {n}"
     );
 }
 

@@ -123,7 +123,7 @@ fn f16_centred_on_the_iso_value_is_five_times_closer() {
     // Measured: centred p50 7.7e-3, p90 5.0e-2; on 0 3.9e-2 and 0.26.
     assert!(plain.p50 < 0.2 && plain.p90 < 1.0, "{plain:?}");
     assert!(
-        centred.p50 * 3.0 < plain.p50 && centred.p90 * 3.0 < plain.p90,
+        centred.p50 * 4.5 < plain.p50 && centred.p90 * 4.5 < plain.p90,
         "{centred:?} {plain:?}"
     );
 }

@@ -624,7 +624,7 @@ fn cases() -> Vec<Case> {
         ),
         (
             "TIR loop: camera inside an ior-4 ball, off-centre, max_events 2000",
-            "trapped rays stop at exactly max_events; time per ray bounded",
+            "trapped rays stop at exactly max_events (which bounds a ray's work; the time is reported, not held to a bound)",
             || {
                 let s = sphere(
                     12,
@@ -843,7 +843,7 @@ fn cases() -> Vec<Case> {
         ),
         (
             "camera 1e9 units away (orthographic and perspective), step and dda traversal",
-            "defined and finite time: rays still march through the volume",
+            "defined, and the render ends: rays still march through the volume (the time is reported, not held to a bound)",
             || {
                 let mut out = Vec::new();
                 for (kind, extra) in [

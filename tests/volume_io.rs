@@ -166,6 +166,22 @@ const REAL_NRRD: &[(&str, [usize; 3], SampleType, [f64; 3])] = &[
 const HEADSQ: &str = "headsq-quarter-ct_64x64x93_u16le.raw";
 const MNI: &str = "mni152-2009a-t1.nii.gz";
 
+/// Each real volume's samples as an independent decoder read them (Python's
+/// `gzip` and `array`, samples in file order): their sum, their sum weighted
+/// by file position modulo 1009 (which a reordering, a byte swap or a lost
+/// row changes), and their maximum.
+const CONTENTS: [(&str, u64, u64, u32); 9] = [
+    ("aneurism.nrrd", 17938365, 9013652071, 255),
+    ("bonsai.nrrd", 230038784, 115906682223, 255),
+    ("boston-teapot.nrrd", 75147291, 37864678180, 255),
+    ("cranium-ct.nrrd", 3100431465, 1562631904384, 4010),
+    ("engine.nrrd", 187475057, 94500684194, 255),
+    ("lobster.nrrd", 71788564, 36187505402, 255),
+    ("tooth.nrrd", 160814065, 81044777229, 255),
+    (HEADSQ, 193392317, 97825511278, 3926),
+    (MNI, 333468829, 168048120574, 255),
+];
+
 fn check_real(vol: &Volume, name: &str, dims: [usize; 3], ty: SampleType, spacing: [f64; 3]) {
     assert_eq!(vol.dims(), dims, "{name} dims");
     assert_eq!(vol.native_type(), ty, "{name} type");
@@ -193,6 +209,14 @@ fn check_real(vol: &Volume, name: &str, dims: [usize; 3], ty: SampleType, spacin
         lo >= 0.0 && hi <= type_max && hi > lo,
         "{name} range {lo}..{hi}"
     );
+    let &(_, sum, weighted, max) = CONTENTS.iter().find(|c| c.0 == name).unwrap();
+    let (mut s, mut w) = (0u64, 0u64);
+    for (i, &v) in vol.samples().iter().enumerate() {
+        assert!(v.fract() == 0.0 && v >= 0.0, "{name}: sample {i} is {v}");
+        s += v as u64;
+        w += v as u64 * (i % 1009) as u64;
+    }
+    assert_eq!((s, w, hi as u32), (sum, weighted, max), "{name}: contents");
 }
 
 fn load_real_nrrd(name: &str) {

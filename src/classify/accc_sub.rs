@@ -372,6 +372,13 @@ mod tests {
                 let block = [0, 1, 4, 5, 16, 17, 20, 21].map(|o| m2 >> (base + o) & 1);
                 assert!(block.iter().all(|&v| v == block[0]), "{cell:?}");
             }
+            // Each quarter lies in its half, whose weight bounds span more:
+            // a quarter kept is in a half kept.
+            assert_eq!(
+                m4 & !m2,
+                0,
+                "{cell:?}: quarters {m4:#x} outside halves {m2:#x}"
+            );
             (bits2, bits4) = (bits2 + m2.count_ones(), bits4 + m4.count_ones());
         }
         // Finer sub-cells keep fewer of the cell's volume.

@@ -684,8 +684,9 @@ mod tests {
                 kept += mask.count_ones();
                 total += 64;
                 let o = origin_of(cell);
-                // 8³ points per sub-cell lattice: a sign change between two
-                // neighbours inside one sub-cell needs that sub-cell tagged.
+                // 16 points per cell axis, 4³ per sub-cell: a sign change
+                // between two neighbours inside one sub-cell needs that
+                // sub-cell tagged.
                 let m = 4 * SUB;
                 let val = |i: usize, j: usize, k: usize| {
                     f.value(DVec3::new(

@@ -735,8 +735,14 @@ mod tests {
         let h = HitImage::read_exr(&p).unwrap();
         assert_eq!((h.width, h.height), (3, 2));
         assert_eq!(h.events, f.events);
-        for (a, b) in h.u.iter().zip(&f.u) {
-            assert!(a == b || (a.is_nan() && b.is_nan()));
+        for (read, wrote) in [(&h.u, &f.u), (&h.v, &f.v)] {
+            assert_eq!(read.len(), wrote.len());
+            for (a, b) in read.iter().zip(wrote) {
+                assert!(
+                    a.to_bits() == b.to_bits() || (a.is_nan() && b.is_nan()),
+                    "{a} {b}"
+                );
+            }
         }
         f.write_png(&dir.join("c.png")).unwrap();
         std::fs::remove_dir_all(&dir).unwrap();

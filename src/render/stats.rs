@@ -185,6 +185,8 @@ impl RenderStats {
             "height": self.height,
             "region": self.region,
             "threads": self.threads,
+            // The kernels' instruction set (`SNELL_ISA` may lower it).
+            "isa": crate::simd::Isa::current().name(),
             "wall_s": self.wall.as_secs_f64(),
             "rays_per_s": c.rays as f64 / self.wall.as_secs_f64().max(1e-12),
             "counters": c,
