@@ -80,17 +80,24 @@ impl HitComparison {
         } else {
             "units"
         };
-        let unknown = match self.events_unknown {
-            0 => String::new(),
-            n => format!(" of {} where both count them", self.pixels - n),
+        let counted = self.pixels - self.events_unknown;
+        let events = match (self.events_unknown, counted) {
+            (0, _) => format!(
+                "{} with different event counts ({:.3}% equal)",
+                self.event_mismatch,
+                100.0 * self.events_equal_fraction
+            ),
+            // POV-Ray's hits, say, carry no event counts.
+            (_, 0) => "event counts not compared (one image has none)".to_string(),
+            (_, n) => format!(
+                "{} with different event counts ({:.3}% equal of {n} where both count them)",
+                self.event_mismatch,
+                100.0 * self.events_equal_fraction
+            ),
         };
         let mut s = format!(
-            "{} pixels: {} reach the backdrop in both, {} in only one, {} with different event counts ({:.3}% equal{unknown})\n",
-            self.pixels,
-            self.both_valid,
-            self.validity_mismatch,
-            self.event_mismatch,
-            100.0 * self.events_equal_fraction
+            "{} pixels: {} reach the backdrop in both, {} in only one, {events}\n",
+            self.pixels, self.both_valid, self.validity_mismatch,
         );
         let n = crate::human::sig4;
         s.push_str(&format!(
@@ -295,6 +302,15 @@ mod tests {
             c.table().contains(
                 "1 with different event counts (0.000% equal of 1 where both count them)"
             )
+        );
+        let mut none = b.clone();
+        none.events = vec![f32::NAN; 3];
+        let c = compare_hits(&a, &none, None).unwrap();
+        assert!(
+            c.table()
+                .contains("event counts not compared (one image has none)"),
+            "{}",
+            c.table()
         );
         let d = disagreements(&a, &b, 10).unwrap();
         assert_eq!(d.iter().map(|d| d.x).collect::<Vec<_>>(), vec![2, 1]);

@@ -21,6 +21,7 @@ pub mod atomic;
 pub mod bench;
 pub mod classify;
 pub mod compare;
+pub mod env;
 pub mod film;
 pub mod filter;
 pub mod heap;

@@ -34,7 +34,7 @@ impl Isa {
         static ISA: OnceLock<Isa> = OnceLock::new();
         *ISA.get_or_init(|| {
             let best = Isa::detect();
-            let asked = std::env::var("SNELL_ISA").ok();
+            let asked = crate::env::setting("SNELL_ISA");
             let (isa, why) = Isa::chosen(best, asked.as_deref());
             if let Some(why) = why {
                 eprintln!("warning: SNELL_ISA: {why}");

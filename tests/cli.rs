@@ -361,6 +361,18 @@ struct Bad {
 }
 
 /// `cmd` is a command line as [`args`] reads it.
+/// `arg` as a shell word that pastes into bash as this one argument: in
+/// single quotes when it holds anything but plain path and option
+/// characters (braces would expand, quotes vanish, brackets glob).
+fn shell_word(arg: &str) -> String {
+    let plain = |c: char| c.is_ascii_alphanumeric() || "_-./:=,%+@".contains(c);
+    if !arg.is_empty() && arg.chars().all(plain) {
+        arg.to_string()
+    } else {
+        format!("'{}'", arg.replace('\'', "'\\''"))
+    }
+}
+
 fn bad(kind: &'static str, what: &'static str, cmd: &str, needles: &[&'static str]) -> Bad {
     Bad {
         kind,
@@ -834,9 +846,10 @@ fn bad_inputs_fail_cleanly_without_output() {
             c.what
         );
         let line = e.lines().find(|l| l.starts_with("error:")).unwrap();
+        let quoted: Vec<String> = c.args.iter().map(|a| shell_word(a)).collect();
         let cmd = match c.env {
-            Some((k, v)) => format!("{k}={v} snell {}", c.args.join(" ")),
-            None => format!("snell {}", c.args.join(" ")),
+            Some((k, v)) => format!("{k}={} snell {}", shell_word(v), quoted.join(" ")),
+            None => format!("snell {}", quoted.join(" ")),
         };
         writeln!(
             table,
@@ -901,13 +914,20 @@ fn first_use_messages_warnings_and_help() {
             "{key}: {e}"
         );
     }
-    // Every command that reads a scene says so alike.
+    // A command that runs no traversal says so in its own words, once, and
+    // not as a render would ("the octree finds crossings cell by cell");
+    // a setting it reads as a render does is noted alike.
     let e = from_root(&format!(
-        "reference {SPHERE} --hits {} {small} --set render.step=0.5",
+        "reference {SPHERE} --hits {} {small} --set render.step=0.5 --set camera.height=3",
         t.path("ref.exr").display()
     ));
     assert!(
-        e.contains("warning: scenes/sphere.toml: --set render.step=0.5"),
+        e.contains("warning: --set render.step ignored: the reference traces"),
+        "{e}"
+    );
+    assert!(!e.contains("cell by cell"), "{e}");
+    assert!(
+        e.contains("warning: scenes/sphere.toml: --set camera.height=3 is ignored"),
         "{e}"
     );
     // What the analytic reference does not read at all, it says so of.

@@ -746,7 +746,7 @@ their verdicts say what this CPU does"
         None => "CPU family unknown".to_string(),
     };
     let mut s = format!(
-        "`{}` — {}, {} at {}, {cpu} ({reference}), {} threads, {}×{}, {} rounds of {} frames, {} in all{}.\n\n",
+        "`{}` — {}, {} at {}, {cpu} ({reference}), {} threads, {}×{}, {} of {}, {} in all{}.\n\n",
         r.command,
         r.date,
         r.machine.build_profile,
@@ -754,8 +754,8 @@ their verdicts say what this CPU does"
         r.threads,
         r.size,
         r.size,
-        r.rounds,
-        r.frames,
+        crate::human::count(r.rounds, "round"),
+        crate::human::count(r.frames, "frame"),
         fmt_duration(r.total_s),
         match r.other_cpu_share {
             Some(x) if x > super::OTHER_CPU_WARNING => format!(

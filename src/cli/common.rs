@@ -269,6 +269,32 @@ pub fn load_scene_part(path: &Path, sets: &[String]) -> anyhow::Result<snell::sc
     ))
 }
 
+/// [`load_scene`] for a command that reads less of a scene than a render
+/// (`reference`, `export-pov`): the notes on settings it does not read
+/// (`unread(key)`) are left to its own warning, which says why in its
+/// terms (a render's note that a step goes unused under the octree would
+/// mislead where no traversal runs at all).
+pub fn load_scene_reading(
+    path: &Path,
+    sets: &[String],
+    unread: impl Fn(&str) -> bool,
+) -> anyhow::Result<snell::scene::Scene> {
+    let scene = snell::scene::Scene::load(path, sets)?;
+    for n in scene.setting_notes().iter().filter(|n| !unread(&n.key)) {
+        eprintln!("warning: {}: {n}", path.display());
+    }
+    Ok(scene)
+}
+
+/// The keys `--set` wrote that `unread` names: the ones a command that
+/// reads less of a scene than a render warns of, in its own terms.
+pub fn unread_sets(sets: &[String], unread: impl Fn(&str) -> bool) -> Vec<&str> {
+    sets.iter()
+        .map(|s| s.split('=').next().unwrap_or("").trim())
+        .filter(|k| unread(k))
+        .collect()
+}
+
 fn warn_setting_notes(path: &Path, scene: snell::scene::Scene) -> snell::scene::Scene {
     for w in scene.setting_notes() {
         eprintln!("warning: {}: {w}", path.display());

@@ -11,7 +11,7 @@ use snell::peer::povray::{self, PovOptions, Variant};
 use snell::peer::{Interpolation, PeerError};
 use snell::volume::LoadOptions;
 
-use super::common::{MemoryLimit, check_distinct, check_output, load_scene};
+use super::common::{MemoryLimit, check_distinct, check_output, load_scene_reading, unread_sets};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -48,14 +48,37 @@ pub struct Args {
     pub limit: MemoryLimit,
 }
 
+/// POV-Ray traces the scene itself: of the renderer's settings the export
+/// reads only `max_events`.
+fn unread(key: &str) -> bool {
+    key.starts_with("render.") && key != "render.max_events"
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     a.limit.apply()?;
-    let scene = load_scene(&a.scene, &a.set)?;
+    let scene = load_scene_reading(&a.scene, &a.set, unread)?;
+    let unread = unread_sets(&a.set, unread);
+    if !unread.is_empty() {
+        eprintln!(
+            "warning: --set {} ignored: POV-Ray traces the exported scene (of the [render] settings the export reads only max_events, as max_trace_level)",
+            unread.join(", ")
+        );
+    }
     let threads = a
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
-    if (a.hits.is_some() || a.json) && !a.run {
-        bail!("--hits and --json need --run");
+    if !a.run {
+        let flags: Vec<&str> = [(a.hits.is_some(), "--hits"), (a.json, "--json")]
+            .into_iter()
+            .filter_map(|(given, flag)| given.then_some(flag))
+            .collect();
+        if !flags.is_empty() {
+            bail!(
+                "{} {} POV-Ray's run: add --run",
+                flags.join(" and "),
+                if flags.len() == 1 { "needs" } else { "need" }
+            );
+        }
     }
     if a.dir.exists() && !a.dir.is_dir() {
         bail!("{}: exists and is not a directory", a.dir.display());

@@ -23,6 +23,16 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let st = vol.stats();
     let d = vol.dims();
     let sp = vol.spacing();
+    // The next step for a new dataset: a scene at the first iso-value worth
+    // trying.
+    let scene_command = st.suggested_iso.first().map(|&iso| {
+        format!(
+            "snell scene {}{} -o scene.toml --iso {}",
+            shell_path(&a.volume.to_string_lossy()),
+            a.vol.flags(),
+            num(iso)
+        )
+    });
     if a.json {
         let j = serde_json::json!({
             "path": a.volume.display().to_string(),
@@ -38,6 +48,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "suggested_above": st.suggested_above,
             "iso_from_modes": st.iso_from_modes,
             "replaced_nonfinite": vol.replaced_nonfinite,
+            "scene_command": scene_command,
         });
         println!("{j}");
         return Ok(());
@@ -59,6 +70,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         num(st.max),
         num(st.mean)
     );
+    if st.min == st.max {
+        println!(
+            "  every sample is {}: no iso-value has a surface in this volume",
+            num(st.min)
+        );
+        return Ok(());
+    }
     println!("  histogram (log scale):");
     let h = &st.histogram;
     let maxlog = h
@@ -95,13 +113,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             iso.join(", ")
         );
     }
-    if let Some(first) = iso.first() {
-        // The next step for a new dataset.
-        println!(
-            "  a scene for it: snell scene {}{} -o scene.toml --iso {first}",
-            shell_path(&a.volume.to_string_lossy()),
-            a.vol.flags()
-        );
+    if let Some(c) = scene_command {
+        println!("  a scene for it: {c}");
     }
     Ok(())
 }

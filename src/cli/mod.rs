@@ -39,7 +39,7 @@ enum Command {
     Info(info::Args),
     /// Write a scene file for a volume: camera and checkerboard framed from its extent, iso-value from its histogram.
     Scene(scene::Args),
-    /// Evaluate the reconstructed field and its gradient at given points (CSV out).
+    /// Evaluate the reconstructed field and its gradient at given points (CSV out; points and gradients in grid units).
     Sample(sample::Args),
     /// Write a synthetic volume (the glass sphere with holes, Marschner-Lobb) as NRRD or MetaImage.
     Phantom(phantom::Args),

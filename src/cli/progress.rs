@@ -115,15 +115,15 @@ pub fn style(template: &str) -> indicatif::ProgressStyle {
 /// Runs `f` on a worker thread while this one shows `step`'s progress (none
 /// when `quiet`). Returns `f`'s value as soon as it ends.
 pub fn watch<T: Send>(step: &Step, quiet: bool, f: impl FnOnce() -> T + Send) -> T {
+    // Read (and a bad value warned of) whatever is shown, as every
+    // `SNELL_*` variable is.
+    let every = log_every();
     let show = if quiet {
         Show::Nothing
     } else if std::io::stderr().is_terminal() {
         Show::Bar
     } else {
-        match log_every() {
-            Some(every) => Show::Log(every),
-            None => Show::Nothing,
-        }
+        every.map_or(Show::Nothing, Show::Log)
     };
     if show == Show::Nothing {
         return f();
@@ -182,9 +182,9 @@ enum Show {
 /// seconds is ignored with a warning, as `SNELL_MEMORY_LIMIT`'s is.
 fn log_every() -> Option<Duration> {
     static EVERY: OnceLock<Option<Duration>> = OnceLock::new();
-    *EVERY.get_or_init(|| match std::env::var("SNELL_PROGRESS_SECONDS") {
-        Err(_) => Some(DEFAULT_LOG_EVERY),
-        Ok(s) => match parse_interval(&s) {
+    *EVERY.get_or_init(|| match snell::env::setting("SNELL_PROGRESS_SECONDS") {
+        None => Some(DEFAULT_LOG_EVERY),
+        Some(s) => match parse_interval(&s) {
             Ok(every) => every,
             Err(why) => {
                 eprintln!("warning: SNELL_PROGRESS_SECONDS: {why}; ignored");

@@ -6,7 +6,9 @@ use clap::Args as ClapArgs;
 
 use snell::reference::Reference;
 
-use super::common::{MemoryLimit, check_distinct, check_format, check_output, given, load_scene};
+use super::common::{
+    MemoryLimit, check_distinct, check_format, check_output, given, load_scene_reading, unread_sets,
+};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -25,9 +27,17 @@ pub struct Args {
     pub limit: MemoryLimit,
 }
 
+/// The analytic spheres take one ray per pixel centre: the filter and the
+/// renderer's settings but `max_events` do not apply.
+fn unread(key: &str) -> bool {
+    (key.starts_with("render.") && key != "render.max_events")
+        || key == "surface.filter"
+        || key == "surface.lambda"
+}
+
 pub fn run(a: Args) -> anyhow::Result<()> {
     a.limit.apply()?;
-    let scene = load_scene(&a.scene, &a.set)?;
+    let scene = load_scene_reading(&a.scene, &a.set, unread)?;
     check_output(&a.hits)?;
     check_format(&a.hits, "--hits", &["exr"])?;
     if let Some(o) = &a.output {
@@ -57,18 +67,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             spec.noise
         );
     }
-    // The analytic spheres take one ray per pixel centre: what a `--set`
-    // asks of the filter or the renderer's settings does not apply.
-    let unread: Vec<&str> = a
-        .set
-        .iter()
-        .map(|s| s.split('=').next().unwrap_or("").trim())
-        .filter(|k| {
-            (k.starts_with("render.") && *k != "render.max_events")
-                || *k == "surface.filter"
-                || *k == "surface.lambda"
-        })
-        .collect();
+    let unread = unread_sets(&a.set, unread);
     if !unread.is_empty() {
         eprintln!(
             "warning: --set {} ignored: the reference traces the phantom's analytic spheres, one ray per pixel centre (of the [render] settings it reads only max_events)",

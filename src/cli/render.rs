@@ -276,11 +276,13 @@ fn render_one(
 ) -> anyhow::Result<()> {
     let frame = renderer.frame(scene, trace.as_mut());
     outputs.write(&frame, None, renderer.frame_id(scene))?;
-    if let Some(p) = &a.stats {
-        write_stats(p, &stats_json(a, scene, &frame.stats)?)?;
-    }
     if let (Some(p), Some(t)) = (&a.trace, &trace) {
         t.write(p).with_context(|| p.display().to_string())?;
+    }
+    // Last, so its peak memory is the one printed: the timeline's writing
+    // may raise it.
+    if let Some(p) = &a.stats {
+        write_stats(p, &stats_json(a, scene, &frame.stats)?)?;
     }
     held.commit()?;
     warn_undefined(&frame, None);
@@ -593,38 +595,60 @@ struct FramePattern {
 }
 
 impl FramePattern {
+    /// Reads the name as printf does: one `%d` or `%0Nd` for the frame
+    /// number, `%%` for a `%` of the name itself.
     fn parse(path: &Path) -> anyhow::Result<FramePattern> {
         let name = path
             .file_name()
             .and_then(|n| n.to_str())
             .context("the name needs a frame number, as in f-%03d.png")?;
-        let Some(at) = name.find('%') else {
+        let (mut before, mut after) = (String::new(), String::new());
+        let mut width = None;
+        let mut rest = name;
+        while let Some(at) = rest.find('%') {
+            let text = if width.is_none() {
+                &mut before
+            } else {
+                &mut after
+            };
+            text.push_str(&rest[..at]);
+            let spec = &rest[at + 1..];
+            if let Some(more) = spec.strip_prefix('%') {
+                text.push('%');
+                rest = more;
+                continue;
+            }
+            let digits: String = spec.chars().take_while(|c| c.is_ascii_digit()).collect();
+            let Some(more) = spec[digits.len()..].strip_prefix('d') else {
+                anyhow::bail!(
+                    "'%' must start a frame number, %d or %0Nd (as in f-%03d.png), or be written %% for a '%' of the name"
+                );
+            };
+            if width.is_some() {
+                anyhow::bail!(
+                    "the file name holds one frame number, %d or %0Nd; it has more than one"
+                );
+            }
+            width = Some(match digits.as_str() {
+                "" => 0,
+                d if d.starts_with('0') && d.len() == 2 && d != "00" => d[1..].parse()?,
+                _ => anyhow::bail!(
+                    "a frame number is written %d or %0Nd with N from 1 to 9, got %{digits}d"
+                ),
+            });
+            rest = more;
+        }
+        let Some(width) = width else {
             anyhow::bail!(
                 "the file name needs a frame number, %d or %0Nd, as in f-%03d.png (one file per frame)"
             );
         };
-        let (before, rest) = (&name[..at], &name[at + 1..]);
-        let digits: String = rest.chars().take_while(|c| c.is_ascii_digit()).collect();
-        let Some(after) = rest[digits.len()..].strip_prefix('d') else {
-            anyhow::bail!("'%' must start a frame number, %d or %0Nd (as in f-%03d.png)");
-        };
-        let width = match digits.as_str() {
-            "" => 0,
-            d if d.starts_with('0') && d.len() == 2 && d != "00" => d[1..].parse()?,
-            _ => anyhow::bail!(
-                "a frame number is written %d or %0Nd with N from 1 to 9, got %{digits}d"
-            ),
-        };
-        if after.contains('%') {
-            anyhow::bail!(
-                "the file name holds one frame number, %d or %0Nd; it has more than one '%'"
-            );
-        }
+        after.push_str(rest);
         Ok(FramePattern {
             dir: path.parent().map(Path::to_path_buf).unwrap_or_default(),
-            before: before.to_string(),
+            before,
             width,
-            after: after.to_string(),
+            after,
         })
     }
 
@@ -681,4 +705,31 @@ fn parse_region(s: &str, width: u32, height: u32) -> anyhow::Result<render::tile
         );
     }
     Ok(render::tile::Tile { x0, y0, x1, y1 })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Frame names as printf writes them: `%d`, `%0Nd`, and `%%` for a
+    /// `%` of the name.
+    #[test]
+    fn frame_patterns_read_as_printf_does() {
+        let name = |p: &str, k| FramePattern::parse(Path::new(p)).map(|f| f.name(k));
+        assert_eq!(
+            name("out/f-%03d.png", 7).unwrap(),
+            Path::new("out/f-007.png")
+        );
+        assert_eq!(name("g-%%d-%d.png", 3).unwrap(), Path::new("g-%d-3.png"));
+        assert_eq!(name("%d-100%%.exr", 12).unwrap(), Path::new("12-100%.exr"));
+        for (bad, says) in [
+            ("a%d%d.png", "more than one"),
+            ("a%%.png", "needs a frame number"),
+            ("a%5d.png", "%0Nd with N from 1 to 9"),
+            ("a%s.png", "written %%"),
+        ] {
+            let e = name(bad, 0).unwrap_err().to_string();
+            assert!(e.contains(says), "{bad}: {e}");
+        }
+    }
 }

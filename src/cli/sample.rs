@@ -147,6 +147,11 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         let f = snell::input::open(&a.points).with_context(|| name.clone())?;
         parse_points(BufReader::new(f), &name, limit)?
     };
+    if let Some(s) = &a.vol.spacing {
+        eprintln!(
+            "warning: --spacing {s} has no effect here: points are grid coordinates and gx, gy, gz the change per grid unit (SPEC.md); divide by a spacing for physical units"
+        );
+    }
     let vol = a.vol.load(&a.volume)?;
     let d = vol.dims();
     let outside = points

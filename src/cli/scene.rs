@@ -146,6 +146,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             num(stats.min)
         );
     }
+    // Framed first: a volume that cannot be framed fails before anything
+    // about its iso-value is said.
+    let extent = vol.extent();
+    let view = view.unwrap_or_else(|| View::thinnest(extent));
+    let aspect = a.width as f64 / a.height as f64;
+    let fr = framing::frame(extent, view, a.fov, aspect)
+        .with_context(|| a.volume.display().to_string())?;
     let iso = match a.iso {
         Some(iso) => {
             if !(iso > stats.min && iso < stats.max) {
@@ -178,11 +185,6 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             iso
         }
     };
-    let extent = vol.extent();
-    let view = view.unwrap_or_else(|| View::thinnest(extent));
-    let aspect = a.width as f64 / a.height as f64;
-    let fr = framing::frame(extent, view, a.fov, aspect)
-        .with_context(|| a.volume.display().to_string())?;
     let draft = Draft {
         note: vec![
             format!(

@@ -155,7 +155,7 @@ pub struct Scene {
     /// Settings the scene file or `--set` wrote that this scene does not
     /// use or uses otherwise than written, one message each (see
     /// [`Scene::setting_notes`]).
-    notes: Vec<String>,
+    notes: Vec<SettingNote>,
     /// The `--set` overrides it was read with, to name one as the cause of
     /// an error found later (in [`Scene::load_volume`]).
     overrides: Vec<String>,
@@ -163,6 +163,23 @@ pub struct Scene {
     written: Vec<(String, String)>,
     /// The keys the file alone wrote.
     file_keys: Vec<String>,
+}
+
+/// A setting the scene does not use as written, and the message that says
+/// so (a command that reads less of a scene than a render passes over the
+/// notes on what it does not read, and says so in its own words).
+#[derive(Clone, Debug, PartialEq)]
+pub struct SettingNote {
+    /// The setting's key, `render.step`.
+    pub key: String,
+    /// The message: the setting as written, and why it goes unused.
+    pub text: String,
+}
+
+impl std::fmt::Display for SettingNote {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.text)
+    }
 }
 
 impl Scene {
@@ -176,7 +193,7 @@ impl Scene {
     /// with a filter that does not smooth; and one setting used otherwise
     /// than written: a `backdrop.u_axis` out of the backdrop's plane, whose
     /// projection onto it is used.
-    pub fn setting_notes(&self) -> &[String] {
+    pub fn setting_notes(&self) -> &[SettingNote] {
         &self.notes
     }
 
@@ -353,6 +370,23 @@ impl Scene {
                             file.display()
                         ),
                     },
+                    // The file the scene file names is missing: said as
+                    // the scene's setting, with where a relative path is
+                    // looked for.
+                    VolumeError::Io { path: file, source }
+                        if source.kind() == std::io::ErrorKind::NotFound
+                            && file == *path
+                            && culprit_override("volume.path", &self.overrides).is_none() =>
+                    {
+                        SceneError::Key {
+                            path: self.path.clone(),
+                            key: "volume.path".into(),
+                            msg: format!(
+                                "{}: no such file (a relative path is read from the scene file's folder)",
+                                file.display()
+                            ),
+                        }
+                    }
                     // The file a `--set volume.path` named.
                     e => match culprit_override("volume.path", &self.overrides) {
                         Some(o) => SceneError::Override {
@@ -836,14 +870,14 @@ checker = 8.0
             "{e}"
         );
         let e = parse_text(
-            |s| s.replace("size = 32", "size = 32\nradius = 10.0"),
-            &["volume.phantom.kind=marschner-lobb"],
+            |s| s.replace("size = 32", "size = 32\nradius = \"ten\""),
+            &["volume.phantom.sigma=2.0"],
         )
         .unwrap_err()
         .to_string();
         assert!(
             e.starts_with("test.toml: [volume.phantom.radius] ")
-                && e.contains("--set volume.phantom.kind"),
+                && e.contains("--set volume.phantom.sigma"),
             "{e}"
         );
         // No override of the section: the message alone.
@@ -959,6 +993,26 @@ checker = 8.0
         };
         let e = parse_text(both, &[]).unwrap_err();
         assert!(e.to_string().contains("not both"), "{e}");
+    }
+
+    /// A `--set` of another phantom kind drops the last kind's shape (a
+    /// sphere's size and radius mean nothing to Marschner–Lobb), keeping
+    /// what every kind has (the format); the same kind keeps everything.
+    #[test]
+    fn a_set_switches_the_phantom_kind() {
+        use crate::phantom::{PhantomFormat, PhantomSpec};
+        let s = parse(&["volume.phantom.kind=marschner-lobb"]).unwrap();
+        match s.volume {
+            VolumeSource::Phantom(PhantomSpec::MarschnerLobb(m)) => {
+                assert_eq!((m.size, m.format), (41, PhantomFormat::U8));
+            }
+            v => panic!("{v:?}"),
+        }
+        let s = parse(&["volume.phantom.kind=sphere"]).unwrap();
+        match s.volume {
+            VolumeSource::Phantom(PhantomSpec::Sphere(p)) => assert_eq!(p.size, 32),
+            v => panic!("{v:?}"),
+        }
     }
 
     /// A section written as a list of tables is named as such, not as its
@@ -1118,14 +1172,19 @@ checker = 8.0
         let ignored = s.setting_notes();
         assert_eq!(ignored.len(), 7, "{ignored:?}");
         assert!(
-            ignored[0].starts_with("--set camera.height=3 is ignored"),
+            ignored[0]
+                .text
+                .starts_with("--set camera.height=3 is ignored"),
             "{ignored:?}"
         );
         // A key inside a table an override wrote is that override's, as
         // in errors.
         let s = parse(&["render={seed=7}"]).unwrap();
         assert_eq!(
-            s.setting_notes(),
+            s.setting_notes()
+                .iter()
+                .map(|n| n.text.as_str())
+                .collect::<Vec<_>>(),
             [
                 "--set render={seed=7} is ignored: render.supersampling is \"none\" (one ray per pixel); it is read by jitter"
             ]
@@ -1137,7 +1196,11 @@ checker = 8.0
         )
         .unwrap();
         assert_eq!(s.setting_notes().len(), 1);
-        assert!(s.setting_notes()[0].starts_with("[camera.height] = 5.0 is ignored"));
+        assert!(
+            s.setting_notes()[0]
+                .text
+                .starts_with("[camera.height] = 5.0 is ignored")
+        );
         // Used: the smoothing spline's lambda, the step of step traversal,
         // footprint settings with footprint supersampling.
         let s = parse(&[
@@ -1159,10 +1222,14 @@ checker = 8.0
         assert_eq!(s.backdrop.u_axis, DVec3::X);
         let s = parse(&["backdrop.u_axis=[1.0, 0.0, 1.0]"]).unwrap();
         assert_eq!(
-            s.setting_notes(),
-            [
+            s.setting_notes()
+                .iter()
+                .map(|n| (n.key.as_str(), n.text.as_str()))
+                .collect::<Vec<_>>(),
+            [(
+                "backdrop.u_axis",
                 "--set backdrop.u_axis=[1.0, 0.0, 1.0] is not in the backdrop's plane (45.000° out of it): its projection onto the plane, [1, 0, 0], is the u axis"
-            ]
+            )]
         );
     }
 
@@ -1231,7 +1298,13 @@ checker = 8.0
         let ignored = |o: &[&str]| -> Vec<String> {
             let s = parse(o).unwrap();
             let mut keys: Vec<String> = (s.setting_notes().iter())
-                .map(|m| m.split(" is ignored").next().unwrap().replace("--set ", ""))
+                .map(|m| {
+                    m.text
+                        .split(" is ignored")
+                        .next()
+                        .unwrap()
+                        .replace("--set ", "")
+                })
                 .collect();
             keys.sort();
             keys

@@ -71,6 +71,14 @@ pub fn apply_override(table: &mut toml::Table, arg: &str) -> Result<(), SceneErr
             "phantom" => {
                 volume.remove("path");
                 volume.remove("raw");
+                // Another kind of phantom keeps only the settings every
+                // kind has; the last kind's shape goes with it.
+                if parts.get(2) == Some(&"kind")
+                    && let Some(toml::Value::Table(phantom)) = volume.get_mut("phantom")
+                    && phantom.get("kind") != Some(&parsed)
+                {
+                    phantom.retain(|k, _| ["format", "noise", "seed"].contains(&k));
+                }
             }
             _ => {}
         }

@@ -10,8 +10,8 @@ use super::file::{CameraKind, SceneFile, default_tile};
 use super::words::{plain_serde_message, plain_value};
 use super::{
     Backdrop, Camera, CameraError, DEFAULT_CLASSIFY, MAX_IMAGE_PIXELS, MAX_IMAGE_SIDE, MIN_STEP,
-    Pattern, Projection, RenderSettings, Scene, SceneError, Supersampling, Surface, Texture,
-    Traversal, VolumeSource, unit_scale,
+    Pattern, Projection, RenderSettings, Scene, SceneError, SettingNote, Supersampling, Surface,
+    Texture, Traversal, VolumeSource, unit_scale,
 };
 use crate::classify::Method;
 use crate::filter::FilterKind;
@@ -119,7 +119,7 @@ pub(super) fn ignored_settings(
     f: &SceneFile,
     surface: &Surface,
     render: &RenderSettings,
-) -> Vec<String> {
+) -> Vec<SettingNote> {
     let mut unused: Vec<(&str, String)> = Vec::new();
     match f.camera.kind {
         CameraKind::Perspective => unused.push((
@@ -172,7 +172,10 @@ pub(super) fn ignored_settings(
         .into_iter()
         .filter_map(|(key, why)| {
             let (_, value) = written.iter().find(|(k, _)| k == key)?;
-            Some(format!("{} is ignored: {why}", as_written(key, value)))
+            Some(SettingNote {
+                key: key.into(),
+                text: format!("{} is ignored: {why}", as_written(key, value)),
+            })
         })
         .collect()
 }
@@ -187,19 +190,22 @@ fn tilted_u_axis(
     u_raw: DVec3,
     normal: DVec3,
     u_axis: DVec3,
-) -> Option<String> {
+) -> Option<SettingNote> {
     let (_, value) = written.iter().find(|(k, _)| k == "backdrop.u_axis")?;
     // The sine of the angle between the axis written and the plane.
     let off = u_raw.dot(normal).abs() / u_raw.length();
     if off <= 1e-6 {
         return None;
     }
-    Some(format!(
-        "{} is not in the backdrop's plane ({:.3}° out of it): its projection onto the plane, {}, is the u axis",
-        as_written("backdrop.u_axis", value),
-        off.min(1.0).asin().to_degrees(),
-        super::framing::vector(u_axis.to_array(), crate::human::num)
-    ))
+    Some(SettingNote {
+        key: "backdrop.u_axis".into(),
+        text: format!(
+            "{} is not in the backdrop's plane ({:.3}° out of it): its projection onto the plane, {}, is the u axis",
+            as_written("backdrop.u_axis", value),
+            off.min(1.0).asin().to_degrees(),
+            super::framing::vector(u_axis.to_array(), crate::human::num)
+        ),
+    })
 }
 
 /// A written setting as a note names it: the `--set` that wrote it, or

@@ -114,7 +114,7 @@ pub fn available_memory() -> Option<u64> {
 
 /// `SNELL_MEMORY_LIMIT` if set and valid, else 80% of available memory, else 16 GiB.
 pub fn default_memory_limit() -> u64 {
-    if let Ok(s) = std::env::var("SNELL_MEMORY_LIMIT") {
+    if let Some(s) = crate::env::setting("SNELL_MEMORY_LIMIT") {
         match parse_bytes(&s) {
             Ok(v) => return v,
             Err(why) => {

@@ -105,6 +105,16 @@ impl Endian {
     }
 }
 
+/// For a scene file given where a volume goes (`snell info scene.toml`):
+/// what reads it.
+fn scene_hint(path: &std::path::Path) -> &'static str {
+    if crate::input::has_extension(path, "toml") {
+        "; a .toml file is a scene: render it with `snell render SCENE.toml -o out.png`, or give this command the volume the scene names"
+    } else {
+        ""
+    }
+}
+
 /// Everything that can go wrong turning a file into a [`Volume`]. Every message
 /// names the file, so the CLI can print it on one line as is.
 #[derive(Debug, thiserror::Error)]
@@ -155,7 +165,8 @@ pub enum VolumeError {
         value: f64,
     },
     #[error(
-        "{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, or raw with --dims and --type)"
+        "{path}: unknown volume format (expected .nrrd, .nhdr, .nii, .nii.gz, .mha, .mhd, or raw with --dims and --type){}",
+        scene_hint(path)
     )]
     UnknownFormat { path: PathBuf },
     #[error("{0}")]
