@@ -3,10 +3,11 @@
 //! cell-by-cell DDA with no precomputed classification, which skips only the
 //! cells its on-the-fly coefficient bound clears).
 
+mod common;
+
 use std::path::PathBuf;
 use std::sync::Arc;
 
-use glam::DVec3;
 use rayon::prelude::*;
 use snell::classify::{self, Method};
 use snell::filter::{Field, FilterKind};
@@ -14,7 +15,6 @@ use snell::lattice::{Lattice, cell_at};
 use snell::phantom::{Hole, MarschnerLobbSpec, PhantomFormat, SphereSpec};
 use snell::prepare::Prepared;
 use snell::render;
-use snell::roots::inside;
 use snell::scene::Scene;
 use snell::volume::{self, LoadOptions, Volume};
 
@@ -63,7 +63,7 @@ fn check_conservative(
     let wrong: Vec<[i64; 3]> = rejected
         .par_iter()
         .map(|&i| cell_at(lattice.cells, i))
-        .filter(|&c| straddles(&field, &lattice, c, iso))
+        .filter(|&c| common::straddles(&field, &lattice, c, iso))
         .collect();
     assert!(
         wrong.is_empty(),
@@ -110,31 +110,6 @@ fn check_conservative(
         exact.count(),
         rejected.len()
     );
-}
-
-/// Whether 6³ points spread over the closed cell `c` see values on both
-/// sides of `iso` (as the renderer tells inside from outside).
-fn straddles(field: &Field, lattice: &Lattice, c: [i64; 3], iso: f64) -> bool {
-    const K: usize = 6;
-    let n = field.dims();
-    let (mut above, mut below) = (false, false);
-    for k in 0..K * K * K {
-        let q = [k % K, k / K % K, k / (K * K)];
-        let p = DVec3::from_array(std::array::from_fn(|a| {
-            let lo = (c[a] as f64 - lattice.offset).max(0.0);
-            let hi = (c[a] as f64 + 1.0 - lattice.offset).min((n[a] - 1) as f64);
-            lo + (hi - lo) * q[a] as f64 / (K - 1) as f64
-        }));
-        if inside(field.value(p) - iso) {
-            above = true;
-        } else {
-            below = true;
-        }
-        if above && below {
-            return true;
-        }
-    }
-    false
 }
 
 #[test]

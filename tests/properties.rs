@@ -13,6 +13,8 @@
 //!
 //! Case counts keep the file at about a second in release.
 
+mod common;
+
 use glam::DVec3;
 use proptest::prelude::*;
 
@@ -414,41 +416,13 @@ fn random_volume(dims: [usize; 3], seed: u64, smooth: bool) -> Volume {
 }
 
 /// Cells where a dense grid of points (the closed cell, 6³) sees values on
-/// both sides of `iso`.
+/// both sides of `iso` ([`common::straddles`]).
 fn crossed_cells(field: &Field, lattice: &Lattice, iso: f64) -> Vec<[i64; 3]> {
-    const K: usize = 6;
-    let n = field.dims();
-    let off = lattice.offset;
-    let mut out = Vec::new();
-    for cz in 0..lattice.cells[2] as i64 {
-        for cy in 0..lattice.cells[1] as i64 {
-            for cx in 0..lattice.cells[0] as i64 {
-                let c = [cx, cy, cz];
-                let range: [(f64, f64); 3] = std::array::from_fn(|a| {
-                    let lo = (c[a] as f64 - off).max(0.0);
-                    let hi = (c[a] as f64 + 1.0 - off).min((n[a] - 1) as f64);
-                    (lo, hi)
-                });
-                let (mut above, mut below) = (false, false);
-                for k in 0..K * K * K {
-                    let q = [k % K, k / K % K, k / (K * K)];
-                    let p = DVec3::from_array(std::array::from_fn(|a| {
-                        let (lo, hi) = range[a];
-                        lo + (hi - lo) * q[a] as f64 / (K - 1) as f64
-                    }));
-                    if inside(field.value(p) - iso) {
-                        above = true;
-                    } else {
-                        below = true;
-                    }
-                }
-                if above && below {
-                    out.push(c);
-                }
-            }
-        }
-    }
-    out
+    let c = lattice.cells.map(|n| n as i64);
+    (0..c[2])
+        .flat_map(|z| (0..c[1]).flat_map(move |y| (0..c[0]).map(move |x| [x, y, z])))
+        .filter(|&cell| common::straddles(field, lattice, cell, iso))
+        .collect()
 }
 
 proptest! {

@@ -111,15 +111,12 @@ impl VolumeArgs {
     pub fn load_options(&self, path: &Path) -> anyhow::Result<LoadOptions> {
         let memory_limit = memory_limit(self.limit.memory_limit.as_deref())?;
         if let Some(format) = volume::Format::of(path) {
-            let given: Vec<&str> = [
+            let given = flags_given([
                 ("--dims", self.dims.is_some()),
                 ("--type", self.sample_type.is_some()),
                 ("--endian", self.endian.is_some()),
                 ("--offset", self.offset.is_some()),
-            ]
-            .into_iter()
-            .filter_map(|(flag, on)| on.then_some(flag))
-            .collect();
+            ]);
             if !given.is_empty() {
                 bail!(
                     "{}: {} {} only to headerless raw volumes (named .raw or without a known extension); this is {}, whose header gives its layout",
@@ -284,6 +281,15 @@ pub fn load_scene_reading(
         eprintln!("warning: {}: {n}", path.display());
     }
     Ok(scene)
+}
+
+/// The flags of `flags` that were given (`true`), in order, for a message
+/// that names the ones at fault.
+pub fn flags_given<const N: usize>(flags: [(&'static str, bool); N]) -> Vec<&'static str> {
+    flags
+        .into_iter()
+        .filter_map(|(flag, on)| on.then_some(flag))
+        .collect()
 }
 
 /// The keys `--set` wrote that `unread` names: the ones a command that

@@ -11,7 +11,9 @@ use snell::peer::povray::{self, PovOptions, Variant};
 use snell::peer::{Interpolation, PeerError};
 use snell::volume::LoadOptions;
 
-use super::common::{MemoryLimit, check_distinct, check_output, load_scene_reading, unread_sets};
+use super::common::{
+    MemoryLimit, check_distinct, check_output, flags_given, load_scene_reading, unread_sets,
+};
 
 #[derive(ClapArgs, Debug)]
 pub struct Args {
@@ -51,7 +53,8 @@ pub struct Args {
 /// POV-Ray traces the scene itself: of the renderer's settings the export
 /// reads only `max_events`.
 fn unread(key: &str) -> bool {
-    key.starts_with("render.") && key != "render.max_events"
+    // `render` alone is a `--set render={...}` table.
+    key.split('.').next() == Some("render") && key != "render.max_events"
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {
@@ -68,10 +71,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         .threads
         .unwrap_or_else(|| std::thread::available_parallelism().map_or(1, |n| n.get()));
     if !a.run {
-        let flags: Vec<&str> = [(a.hits.is_some(), "--hits"), (a.json, "--json")]
-            .into_iter()
-            .filter_map(|(given, flag)| given.then_some(flag))
-            .collect();
+        let flags = flags_given([("--hits", a.hits.is_some()), ("--json", a.json)]);
         if !flags.is_empty() {
             bail!(
                 "{} {} POV-Ray's run: add --run",

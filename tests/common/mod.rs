@@ -1,6 +1,7 @@
 //! What the end-to-end tests share: the repository's and the shared data's
-//! paths, a scratch directory per test, and `snell` run from one command
-//! line. (Each test crate compiles this module and uses part of it.)
+//! paths, a scratch directory per test, `snell` run from one command line,
+//! and the dense sampling that classifications are held to. (Each test
+//! crate compiles this module and uses part of it.)
 #![allow(dead_code)]
 
 use std::path::PathBuf;
@@ -123,4 +124,35 @@ impl Drop for Tmp {
     fn drop(&mut self) {
         let _ = std::fs::remove_dir_all(&self.0);
     }
+}
+
+/// Whether 6³ points spread over the closed knot cell `c` (clipped to the
+/// grid) see the field on both sides of `iso`, as the renderer tells inside
+/// from outside: dense sampling, the truth the classifications are held to.
+pub fn straddles(
+    field: &snell::filter::Field,
+    lattice: &snell::lattice::Lattice,
+    c: [i64; 3],
+    iso: f64,
+) -> bool {
+    const K: usize = 6;
+    let n = field.dims();
+    let (mut above, mut below) = (false, false);
+    for k in 0..K * K * K {
+        let q = [k % K, k / K % K, k / (K * K)];
+        let p = glam::DVec3::from_array(std::array::from_fn(|a| {
+            let lo = (c[a] as f64 - lattice.offset).max(0.0);
+            let hi = (c[a] as f64 + 1.0 - lattice.offset).min((n[a] - 1) as f64);
+            lo + (hi - lo) * q[a] as f64 / (K - 1) as f64
+        }));
+        if snell::roots::inside(field.value(p) - iso) {
+            above = true;
+        } else {
+            below = true;
+        }
+        if above && below {
+            return true;
+        }
+    }
+    false
 }
