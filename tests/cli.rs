@@ -1648,7 +1648,8 @@ fn region_parts_merge_to_the_whole_frame() {
     assert!(!t.path("bad.exr").exists() && !t.path("bad.png").exists());
     // A part of another frame (another ior) is refused, naming both parts;
     // one rendered with another tile size and thread count, a walk shortcut
-    // off and an ignored step is the same frame's.
+    // off, an ignored step, and another cell traversal and classification
+    // is the same frame's, bit for bit.
     let other = |name: &str, sets: &str| {
         ok(t.run(&format!(
             "{frame} --region 0,50,96,80 --set render.supersampling=prss \
@@ -1667,9 +1668,14 @@ fn region_parts_merge_to_the_whole_frame() {
     other(
         "tiled",
         "--set render.tile=8 --threads 1 --set render.clear_crossing_cells=false \
-         --set render.step=0.5",
+         --set render.step=0.5 --set render.traversal=distance --set render.classify=accc8",
     );
-    ok(t.run(&format!("merge {p0} {p1} tiled.exr -o bad.exr")));
+    ok(t.run(&format!("merge {p0} {p1} tiled.exr -o mixed.exr")));
+    ok(t.run(&format!("merge {p0} {p1} {p2} -o same.exr")));
+    assert!(
+        std::fs::read(t.path("mixed.exr")).unwrap() == std::fs::read(t.path("same.exr")).unwrap(),
+        "a part by other cell traversal changes the merged frame"
+    );
     let o = t.run("render {sphere} -o r.png --region 0,0,600,10");
     assert_fails(&o, &["--region", "X1 <= 512"]);
     let o = t.run("render {sphere} -o r.png --region 5,5,5");

@@ -553,8 +553,11 @@ impl Scene {
     /// path), nor what leaves the pixels as they are: the tile size, the
     /// walk's shortcuts, and the settings the frame does not read (those
     /// its warnings call ignored: `step` with a cell traversal, a seed
-    /// without jitter, …). The parts of one frame (`render --region`) carry
-    /// it, and `snell merge` refuses parts whose fingerprints differ.
+    /// without jitter, …), nor which cell traversal and classification find
+    /// the crossings (DDA, octree and distance cubes over any tags give the
+    /// same bits, `tests/accel.rs`; the step march does not). The parts of
+    /// one frame (`render --region`) carry it, and `snell merge` refuses
+    /// parts whose fingerprints differ.
     pub fn frame_fingerprint(&self, volume_hash: u64) -> u64 {
         let b = &self.backdrop;
         let pattern = match &b.pattern {
@@ -583,6 +586,12 @@ impl Scene {
         // A setting the frame does not read does not make another frame.
         for (setting, _) in resolve::unread_render_settings(&self.render) {
             setting.normalise(&mut render);
+        }
+        // Nor does the way the cells holding crossings are found.
+        if render.traversal != Traversal::Step {
+            render.traversal = Traversal::Dda;
+            render.classify = None;
+            render.leaf = 0;
         }
         let text = format!(
             "{}x{} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {pattern} {:?}",
@@ -1233,6 +1242,33 @@ checker = 8.0
         );
     }
 
+    /// The cell traversals and classifications give one frame: parts
+    /// rendered with any of them merge; the step march is another frame.
+    #[test]
+    fn fingerprints_ignore_how_crossing_cells_are_found() {
+        let print = |o: &[&str]| {
+            let o: Vec<String> = o.iter().map(|s| s.to_string()).collect();
+            Scene::parse(SCENE, Path::new("t.toml"), &o)
+                .unwrap()
+                .frame_fingerprint(1)
+        };
+        let dda = print(&["render.traversal=dda", "render.classify=none"]);
+        for (traversal, classify) in [
+            ("octree", "bezier"),
+            ("octree", "accc8"),
+            ("distance", "bezier"),
+            ("dda", "bmcc"),
+        ] {
+            let t = format!("render.traversal={traversal}");
+            let c = format!("render.classify={classify}");
+            assert_eq!(print(&[&t, &c]), dda, "{traversal} {classify}");
+        }
+        assert_ne!(
+            print(&["render.traversal=step", "render.classify=none"]),
+            dda
+        );
+    }
+
     /// A setting the frame does not read leaves its fingerprint as it is;
     /// one it reads changes it. Swept over every traversal, mode and
     /// fallback, so each key the unread list can hold is normalised.
@@ -1278,9 +1314,13 @@ checker = 8.0
                     for other in others {
                         let key = other.split('=').next().unwrap();
                         let after = print(&[base.clone(), vec![other.to_string()]].concat());
+                        // The octree's leaf size changes which cells are
+                        // walked, never a crossing.
+                        let same =
+                            unread.contains(&key) || (traversal != "step" && key == "render.leaf");
                         assert_eq!(
                             before == after,
-                            unread.contains(&key),
+                            same,
                             "{base:?} + {other}: unread {unread:?}"
                         );
                     }
