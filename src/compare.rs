@@ -88,7 +88,7 @@ impl HitComparison {
                 100.0 * self.events_equal_fraction
             ),
             // POV-Ray's hits, say, carry no event counts.
-            (_, 0) => "event counts not compared (one image has none)".to_string(),
+            (_, 0) => "event counts not compared (no pixel has one in both)".to_string(),
             (_, n) => format!(
                 "{} with different event counts ({:.3}% equal of {n} where both count them)",
                 self.event_mismatch,
@@ -308,7 +308,7 @@ mod tests {
         let c = compare_hits(&a, &none, None).unwrap();
         assert!(
             c.table()
-                .contains("event counts not compared (one image has none)"),
+                .contains("event counts not compared (no pixel has one in both)"),
             "{}",
             c.table()
         );

@@ -1047,7 +1047,7 @@ pub fn prefetch<T>(x: &T) {
 pub(crate) fn kernels_run(what: &str, run: bool) -> bool {
     if !run {
         assert!(
-            std::env::var_os("SNELL_REQUIRE_AVX512").is_none(),
+            crate::env::setting("SNELL_REQUIRE_AVX512").is_none(),
             "{what}: cannot run on this CPU (or under SNELL_ISA), and SNELL_REQUIRE_AVX512 asks for it"
         );
         eprintln!("skipped: {what} cannot run on this CPU (or under SNELL_ISA)");

@@ -255,7 +255,7 @@ fn peer_comparison() {
 
     if !snell::peer::installed() {
         assert!(
-            std::env::var_os("SNELL_REQUIRE_POVRAY").is_none(),
+            snell::env::setting("SNELL_REQUIRE_POVRAY").is_none(),
             "povray is not found, and SNELL_REQUIRE_POVRAY asks for it"
         );
         eprintln!("skipping the POV-Ray run: povray is not installed (apt-get install povray)");

@@ -361,18 +361,6 @@ struct Bad {
 }
 
 /// `cmd` is a command line as [`args`] reads it.
-/// `arg` as a shell word that pastes into bash as this one argument: in
-/// single quotes when it holds anything but plain path and option
-/// characters (braces would expand, quotes vanish, brackets glob).
-fn shell_word(arg: &str) -> String {
-    let plain = |c: char| c.is_ascii_alphanumeric() || "_-./:=,%+@".contains(c);
-    if !arg.is_empty() && arg.chars().all(plain) {
-        arg.to_string()
-    } else {
-        format!("'{}'", arg.replace('\'', "'\\''"))
-    }
-}
-
 fn bad(kind: &'static str, what: &'static str, cmd: &str, needles: &[&'static str]) -> Bad {
     Bad {
         kind,
@@ -846,9 +834,17 @@ fn bad_inputs_fail_cleanly_without_output() {
             c.what
         );
         let line = e.lines().find(|l| l.starts_with("error:")).unwrap();
-        let quoted: Vec<String> = c.args.iter().map(|a| shell_word(a)).collect();
+        let quoted: Vec<String> = c
+            .args
+            .iter()
+            .map(|a| snell::human::shell_quote(a))
+            .collect();
         let cmd = match c.env {
-            Some((k, v)) => format!("{k}={} snell {}", shell_word(v), quoted.join(" ")),
+            Some((k, v)) => format!(
+                "{k}={} snell {}",
+                snell::human::shell_quote(v),
+                quoted.join(" ")
+            ),
             None => format!("snell {}", quoted.join(" ")),
         };
         writeln!(
@@ -1334,7 +1330,7 @@ fn instruction_sets_give_the_same_bits() {
                     .unwrap();
             let ran = stats["isa"].as_str().unwrap();
             let here = (snell::simd::Isa::available().iter()).any(|i| i.name().starts_with(isa));
-            if here || std::env::var_os("SNELL_REQUIRE_AVX512").is_some() {
+            if here || snell::env::setting("SNELL_REQUIRE_AVX512").is_some() {
                 assert!(ran.starts_with(isa), "{filter}: {isa} asked, {ran} ran");
             } else {
                 eprintln!("this CPU cannot run {isa}: compared {ran} in its place");

@@ -251,7 +251,7 @@ fn povray_or_skip(test: &str) -> bool {
         return true;
     }
     assert!(
-        std::env::var_os("SNELL_REQUIRE_POVRAY").is_none(),
+        snell::env::setting("SNELL_REQUIRE_POVRAY").is_none(),
         "{test}: povray is not found, and SNELL_REQUIRE_POVRAY asks for it"
     );
     eprintln!("skipping {test}: povray is not installed (apt-get install povray)");

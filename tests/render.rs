@@ -150,10 +150,19 @@ fn dda_and_dense_step_agree_and_dda_never_misses() {
         .count();
     eprintln!("events differ on {differ} of {n} pixels; step found more on {step_found_more}");
     assert!(differ as f64 <= 0.002 * n as f64, "{differ} of {n}");
-    // A crossing the dense march finds, the cell-by-cell solve finds too.
+    assert!(
+        step_found_more as f64 <= 0.001 * n as f64,
+        "{step_found_more} of {n}"
+    );
+    // Paths may part after a crossing (each refracts at its own point), but
+    // every primary ray starts the same: a first crossing the dense march
+    // finds, the cell-by-cell solve finds too.
+    let missed = (0..n)
+        .filter(|&i| step.film.events[i] > 0.0 && dda.film.events[i] == 0.0)
+        .count();
     assert_eq!(
-        step_found_more, 0,
-        "the step found more events on {step_found_more} of {n}"
+        missed, 0,
+        "dda found no crossing on {missed} pixels where the step did"
     );
 }
 

@@ -267,10 +267,11 @@ pub fn load_scene_part(path: &Path, sets: &[String]) -> anyhow::Result<snell::sc
 }
 
 /// [`load_scene`] for a command that reads less of a scene than a render
-/// (`reference`, `export-pov`): the notes on settings it does not read
-/// (`unread(key)`) are left to its own warning, which says why in its
-/// terms (a render's note that a step goes unused under the octree would
-/// mislead where no traversal runs at all).
+/// (`reference`, `export-pov`): the notes on settings it does not read at
+/// all (`unread(key)`) are dropped, a render's note that a step goes unused
+/// under the octree misleading where no traversal runs; the command warns
+/// of the `--set`s of such settings in its own words ([`unread_sets`]),
+/// and of the scene file's not at all (every scene writes a `[render]`).
 pub fn load_scene_reading(
     path: &Path,
     sets: &[String],
@@ -294,9 +295,9 @@ pub fn flags_given<const N: usize>(flags: [(&'static str, bool); N]) -> Vec<&'st
 
 /// The keys `--set` wrote that `unread` names: the ones a command that
 /// reads less of a scene than a render warns of, in its own terms.
-pub fn unread_sets(sets: &[String], unread: impl Fn(&str) -> bool) -> Vec<&str> {
+pub fn unread_sets(sets: &[String], unread: impl Fn(&str) -> bool) -> Vec<String> {
     sets.iter()
-        .map(|s| s.split('=').next().unwrap_or("").trim())
+        .map(|s| snell::scene::override_key(s))
         .filter(|k| unread(k))
         .collect()
 }

@@ -53,8 +53,7 @@ pub struct Args {
 /// POV-Ray traces the scene itself: of the renderer's settings the export
 /// reads only `max_events`.
 fn unread(key: &str) -> bool {
-    // `render` alone is a `--set render={...}` table.
-    key.split('.').next() == Some("render") && key != "render.max_events"
+    key.starts_with("render.") && key != "render.max_events"
 }
 
 pub fn run(a: Args) -> anyhow::Result<()> {

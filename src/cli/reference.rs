@@ -30,8 +30,7 @@ pub struct Args {
 /// The analytic spheres take one ray per pixel centre: the filter and the
 /// renderer's settings but `max_events` do not apply.
 fn unread(key: &str) -> bool {
-    // `render` alone is a `--set render={...}` table.
-    (key.split('.').next() == Some("render") && key != "render.max_events")
+    (key.starts_with("render.") && key != "render.max_events")
         || key == "surface.filter"
         || key == "surface.lambda"
 }

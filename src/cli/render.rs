@@ -484,21 +484,25 @@ impl Outputs {
         for p in named.into_iter().flatten() {
             check_output(p)?;
         }
-        // One file each, whatever the frames: an orbit's stats hold every
-        // frame's times, so a frame pattern there would name one literal
-        // `s%d.json`.
-        for (flag, p) in [("--stats", &a.stats), ("--trace", &a.trace)] {
-            if let Some(p) = p.as_ref().filter(|p| FramePattern::parse(p).is_ok()) {
-                anyhow::bail!(
-                    "{flag} {}: the name holds a frame number (%d), but {flag} writes one file (an orbit's stats keep every frame's); give it a plain name",
-                    p.display()
-                );
-            }
-        }
         if a.orbit.is_some() && a.trace.is_some() {
             anyhow::bail!(
                 "--trace records one frame's timeline; render it without --orbit (an orbit prints each frame's time, and --stats keeps them)"
             );
+        }
+        // One file each, whatever the frames: a frame pattern there would
+        // name one literal `s%d.json`.
+        for (flag, p) in [("--stats", &a.stats), ("--trace", &a.trace)] {
+            if let Some(p) = p.as_ref().filter(|p| FramePattern::parse(p).is_ok()) {
+                let orbit = if flag == "--stats" && a.orbit.is_some() {
+                    " (an orbit's stats keep every frame's time)"
+                } else {
+                    ""
+                };
+                anyhow::bail!(
+                    "{flag} {}: the name holds a frame number (%d), but {flag} writes one file{orbit}; give it a plain name",
+                    p.display()
+                );
+            }
         }
         let mut out = Outputs {
             png: Output::new(&a.output, "-o", &["png"], a.orbit)?,

@@ -147,12 +147,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         let f = snell::input::open(&a.points).with_context(|| name.clone())?;
         parse_points(BufReader::new(f), &name, limit)?
     };
+    let vol = a.vol.load(&a.volume)?;
     if let Some(s) = &a.vol.spacing {
         eprintln!(
             "warning: --spacing {s} has no effect here: points are grid coordinates and gx, gy, gz the change per grid unit (SPEC.md); divide by a spacing for physical units"
         );
     }
-    let vol = a.vol.load(&a.volume)?;
     let d = vol.dims();
     let outside = points
         .iter()

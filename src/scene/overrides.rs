@@ -127,7 +127,7 @@ fn from_current_dir(p: String) -> String {
 
 /// The key a `--set key=value` sets, as the scene's keys are written
 /// (`camera . fov_y` is `camera.fov_y`).
-fn override_key(arg: &str) -> String {
+pub fn override_key(arg: &str) -> String {
     let key = arg.split_once('=').map_or(arg, |(k, _)| k);
     key.split('.').map(str::trim).collect::<Vec<_>>().join(".")
 }
