@@ -2,6 +2,8 @@
 //! traversals against each other, determinism, and numerical stress cases.
 //! Every case asserts an outcome, and that no ray ends undefined.
 
+mod common;
+
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -499,53 +501,17 @@ fn one_voxel_thick_shell_is_not_missed() {
 #[test]
 fn flat_volumes_show_only_the_backdrop() {
     for axis in 0..3 {
-        let (up, u_axis) = match axis {
-            1 => ("[0.0, 0.0, 1.0]", "[1.0, 0.0, 0.0]"),
-            _ => ("[0.0, 1.0, 0.0]", "[0.0, 1.0, 0.0]"),
-        };
-        let at = |d: f64| {
-            let mut p = [7.5f64; 3];
-            p[axis] = d;
-            format!("[{:.1}, {:.1}, {:.1}]", p[0], p[1], p[2])
-        };
-        let mut normal = [0.0f64; 3];
-        normal[axis] = -1.0;
-        let sets = [
-            format!("camera.position={}", at(-50.0)),
-            format!("camera.look_at={}", at(0.0)),
-            format!("camera.up={up}"),
-            format!("backdrop.center={}", at(100.0)),
-            format!(
-                "backdrop.normal=[{:.1}, {:.1}, {:.1}]",
-                normal[0], normal[1], normal[2]
-            ),
-            format!("backdrop.u_axis={u_axis}"),
-        ];
+        let sets = common::face_on(axis);
         let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
         let scene = load(
             "sphere.toml",
             &with(&SMALL, &with(&["surface.filter=bspline3"], &sets)),
         );
-        let slab = |thickness: usize| {
-            let mut dims = [16; 3];
-            dims[axis] = thickness;
-            let mut data = Vec::new();
-            for z in 0..dims[2] {
-                for y in 0..dims[1] {
-                    for x in 0..dims[0] {
-                        let p = [x, y, z];
-                        let layer = p[axis];
-                        let r2: f64 = (0..3)
-                            .filter(|&a| a != axis)
-                            .map(|a| (p[a] as f64 - 7.5).powi(2))
-                            .sum();
-                        let disk = layer + 1 == thickness && r2 < 36.0;
-                        data.push(if disk { 200.0 } else { 0.0 });
-                    }
-                }
-            }
-            let vol = Volume::new(dims, [1.0; 3], SampleType::U8, data).unwrap();
-            render_volume(&scene, vol)
+        let slab = |thickness| {
+            render_volume(
+                &scene,
+                common::disk_slab(axis, thickness, 200.0, SampleType::U8),
+            )
         };
         let flat = slab(1);
         assert_eq!(flat.stats.counters.refractions, 0, "axis {axis}");

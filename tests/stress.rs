@@ -9,6 +9,8 @@
 //! that variable is set; docs/robustness.md holds a copy). A failing case is
 //! recorded, the rest still run, and the test fails at the end.
 
+mod common;
+
 use std::fmt::Write as _;
 use std::panic::{AssertUnwindSafe, catch_unwind};
 use std::path::PathBuf;
@@ -752,44 +754,14 @@ fn cases() -> Vec<Case> {
             || {
                 let mut out = Vec::new();
                 for axis in 0..3 {
-                    // The camera on the slab's axis, 50 units before it, the
-                    // backdrop 100 behind.
-                    let at = |d: f64| {
-                        let mut p = [7.5; 3];
-                        p[axis] = d;
-                        format!("[{:.1}, {:.1}, {:.1}]", p[0], p[1], p[2])
-                    };
-                    let mut n = [0.0; 3];
-                    n[axis] = -1.0;
-                    let normal = format!("[{:.1}, {:.1}, {:.1}]", n[0], n[1], n[2]);
-                    let (up, u) = if axis == 1 {
-                        ("[0.0, 0.0, 1.0]", "[1.0, 0.0, 0.0]")
-                    } else {
-                        ("[0.0, 1.0, 0.0]", "[0.0, 1.0, 0.0]")
-                    };
-                    let sets = [
-                        format!("camera.position={}", at(-50.0)),
-                        format!("camera.look_at={}", at(0.0)),
-                        format!("camera.up={up}"),
-                        format!("backdrop.center={}", at(100.0)),
-                        format!("backdrop.normal={normal}"),
-                        format!("backdrop.u_axis={u}"),
-                    ];
+                    let sets = common::face_on(axis);
                     let sets: Vec<&str> = sets.iter().map(String::as_str).collect();
                     let s = sphere(32, &sets);
-                    let slab = |thickness: usize| {
-                        let mut dims = [16; 3];
-                        dims[axis] = thickness;
-                        let f = volume(dims, |x, y, z| {
-                            let p = [x, y, z];
-                            let r2: f64 = (0..3)
-                                .filter(|&a| a != axis)
-                                .map(|a| (p[a] - 7.5).powi(2))
-                                .sum();
-                            let back = p[axis] as usize + 1 == thickness;
-                            if back && r2 < 36.0 { 1.0 } else { 0.0 }
-                        });
-                        render(&s, Some(f))
+                    let slab = |thickness| {
+                        render(
+                            &s,
+                            Some(common::disk_slab(axis, thickness, 1.0, SampleType::F32)),
+                        )
                     };
                     let flat = slab(1);
                     let c = flat.stats.counters;

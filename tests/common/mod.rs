@@ -156,3 +156,58 @@ pub fn straddles(
     }
     false
 }
+
+/// The `--set`s that look at a 16-sample slab face on along `axis` (0, 1,
+/// 2): the camera 50 units before the slab's centre, the backdrop 100
+/// behind it, facing back.
+pub fn face_on(axis: usize) -> Vec<String> {
+    let at = |d: f64| {
+        let mut p = [7.5f64; 3];
+        p[axis] = d;
+        format!("[{:.1}, {:.1}, {:.1}]", p[0], p[1], p[2])
+    };
+    let mut n = [0.0f64; 3];
+    n[axis] = -1.0;
+    let (up, u_axis) = if axis == 1 {
+        ("[0.0, 0.0, 1.0]", "[1.0, 0.0, 0.0]")
+    } else {
+        ("[0.0, 1.0, 0.0]", "[0.0, 1.0, 0.0]")
+    };
+    vec![
+        format!("camera.position={}", at(-50.0)),
+        format!("camera.look_at={}", at(0.0)),
+        format!("camera.up={up}"),
+        format!("backdrop.center={}", at(100.0)),
+        format!("backdrop.normal=[{:.1}, {:.1}, {:.1}]", n[0], n[1], n[2]),
+        format!("backdrop.u_axis={u_axis}"),
+    ]
+}
+
+/// A 16×16 slab `thickness` samples thick along `axis`, `value` on a disk
+/// of radius 6 in its last layer and 0 elsewhere: one sample thick, a
+/// plane with a surface in it but no inside; two, the disk behind a layer
+/// of 0, which refracts.
+pub fn disk_slab(
+    axis: usize,
+    thickness: usize,
+    value: f32,
+    ty: snell::volume::SampleType,
+) -> snell::volume::Volume {
+    let mut dims = [16; 3];
+    dims[axis] = thickness;
+    let mut data = Vec::with_capacity(dims.iter().product());
+    for z in 0..dims[2] {
+        for y in 0..dims[1] {
+            for x in 0..dims[0] {
+                let p = [x, y, z];
+                let r2: f64 = (0..3)
+                    .filter(|&a| a != axis)
+                    .map(|a| (p[a] as f64 - 7.5).powi(2))
+                    .sum();
+                let disk = p[axis] + 1 == thickness && r2 < 36.0;
+                data.push(if disk { value } else { 0.0 });
+            }
+        }
+    }
+    snell::volume::Volume::new(dims, [1.0; 3], ty, data).unwrap()
+}
