@@ -1658,7 +1658,18 @@ fn region_parts_merge_to_the_whole_frame() {
         &o,
         &[
             "part0-0-hits.exr and",
-            "ior.exr are parts of different frames",
+            "ior.exr are parts of different frames: the surface (filter, iso-value or ior) differs (frame ",
+        ],
+    );
+    other(
+        "ior-grid",
+        "--set surface.ior=1.3 --set render.supersampling=grid --set render.samples=2",
+    );
+    let o = t.run(&format!("merge {p0} {p1} ior-grid.exr -o bad.exr"));
+    assert_fails(
+        &o,
+        &[
+            "frames: the surface (filter, iso-value or ior) and the [render] settings differ (frame ",
         ],
     );
     other(

@@ -8,6 +8,7 @@ use std::time::Instant;
 use anyhow::Context;
 use clap::Args as ClapArgs;
 
+use snell::film::FrameId;
 use snell::render::{self, Prepared};
 use snell::scene::{Orbit, Scene};
 use snell::volume::LoadOptions;
@@ -237,7 +238,7 @@ struct Renderer<'a> {
 impl Renderer<'_> {
     /// The fingerprint of `scene`'s frame, for a `--region` part's EXR
     /// files (none for a whole frame).
-    fn frame_id(&self, scene: &Scene) -> Option<u64> {
+    fn frame_id(&self, scene: &Scene) -> Option<FrameId> {
         self.volume_hash.map(|h| scene.frame_fingerprint(h))
     }
 
@@ -560,7 +561,12 @@ impl Outputs {
 
     /// Writes frame `k`'s images (the one frame's without `--orbit`), its
     /// EXR files carrying the frame fingerprint `id` (a part's).
-    fn write(&self, frame: &render::Frame, k: Option<u32>, id: Option<u64>) -> anyhow::Result<()> {
+    fn write(
+        &self,
+        frame: &render::Frame,
+        k: Option<u32>,
+        id: Option<FrameId>,
+    ) -> anyhow::Result<()> {
         frame.film.write_png(&self.png.name(k))?;
         if let Some(h) = &self.hits {
             frame.film.write_hits_exr(&h.name(k), id)?;

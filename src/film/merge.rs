@@ -8,7 +8,9 @@
 
 use std::path::{Path, PathBuf};
 
-use super::{FRAME_ATTRIBUTE, FilmError, Placement, to_u8, write_exr_placed, write_png_rgb};
+use super::{
+    FRAME_ATTRIBUTE, FilmError, FrameId, Placement, to_u8, write_exr_placed, write_png_rgb,
+};
 
 /// One part as read: where it sits and its channels (sorted by name).
 #[derive(Clone, Debug)]
@@ -37,14 +39,16 @@ pub enum MergeError {
     #[error("{path}: {msg}")]
     Part { path: PathBuf, msg: String },
     #[error(
-        "{a} and {b} are parts of different frames (scene settings or volume differ: frame {} against {}); render every part from the same scene and volume",
-        frame_name(*.a_frame), frame_name(*.b_frame)
+        "{a} and {b} are parts of different frames: {} (frame {} against {}); render every part from the same scene and volume",
+        what_differs(&frames[0], &frames[1]),
+        frame_name(&frames[0]),
+        frame_name(&frames[1])
     )]
     OtherFrame {
         a: PathBuf,
-        a_frame: Option<u64>,
         b: PathBuf,
-        b_frame: Option<u64>,
+        /// Boxed: two frame ids would make every merge result as large.
+        frames: Box<[Option<FrameId>; 2]>,
     },
     #[error("{a} and {b} both cover pixel ({x}, {y})")]
     Overlap {
@@ -75,11 +79,48 @@ pub enum MergeError {
 }
 
 /// A frame fingerprint as a message names it.
-fn frame_name(frame: Option<u64>) -> String {
+fn frame_name(frame: &Option<FrameId>) -> String {
     match frame {
-        Some(f) => format!("{f:016x}"),
+        Some(f) => format!("{:016x}", f.hash),
         None => "unnamed (a whole frame's file, or a part from another program or an older snell)"
             .into(),
+    }
+}
+
+/// What differs between two parts' frames, in words: the aspects whose
+/// hashes differ when both parts carry them.
+fn what_differs(a: &Option<FrameId>, b: &Option<FrameId>) -> String {
+    let words = |aspect: &'static str| match aspect {
+        "volume" => "the volume's samples or spacing",
+        "image" => "the image size or background",
+        "camera" => "the camera",
+        "surface" => "the surface (filter, iso-value or ior)",
+        "backdrop" => "the backdrop",
+        "render" => "the [render] settings",
+        other => other,
+    };
+    let differ = match (a, b) {
+        (Some(a), Some(b)) => a.differing(b),
+        _ => None,
+    };
+    match differ.as_deref() {
+        Some([]) | None => "scene settings or volume differ".into(),
+        Some(names) => {
+            let names: Vec<&str> = names.iter().map(|&n| words(n)).collect();
+            let list = match names.as_slice() {
+                [one] => one.to_string(),
+                [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
+                [] => unreachable!("matched above"),
+            };
+            format!(
+                "{list} {}",
+                if names.len() == 1 {
+                    "differs"
+                } else {
+                    "differ"
+                }
+            )
+        }
     }
 }
 
@@ -127,7 +168,7 @@ pub fn read_part(path: &Path) -> Result<Part, MergeError> {
     {
         None => None,
         Some(exr::prelude::AttributeValue::Text(t)) => {
-            Some(u64::from_str_radix(&t.to_string(), 16).map_err(|_| {
+            Some(FrameId::parse(&t.to_string()).ok_or_else(|| {
                 bad(format!(
                     "its {FRAME_ATTRIBUTE} attribute '{t}' is not a frame fingerprint"
                 ))
@@ -173,9 +214,8 @@ pub fn merge(parts: &[Part], memory_limit: u64) -> Result<Merged, MergeError> {
         if p.at.frame != first.at.frame {
             return Err(MergeError::OtherFrame {
                 a: first.path.clone(),
-                a_frame: first.at.frame,
                 b: p.path.clone(),
-                b_frame: p.at.frame,
+                frames: Box::new([first.at.frame, p.at.frame]),
             });
         }
         let theirs: Vec<&str> = p.channels.iter().map(|c| c.0.as_str()).collect();

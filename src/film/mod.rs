@@ -383,7 +383,7 @@ impl Film {
 
     /// The film's place in the image, for its EXR files: in the frame
     /// `frame`, when given ([`Placement::frame`]).
-    fn placement(&self, frame: Option<u64>) -> Placement {
+    fn placement(&self, frame: Option<FrameId>) -> Placement {
         Placement {
             origin: self.origin,
             full: self.full,
@@ -409,7 +409,7 @@ impl Film {
 
     /// Float RGB EXR of the colour image (of the frame `frame`, when given:
     /// [`Placement::frame`]).
-    pub fn write_color_exr(&self, path: &Path, frame: Option<u64>) -> Result<(), FilmError> {
+    pub fn write_color_exr(&self, path: &Path, frame: Option<FrameId>) -> Result<(), FilmError> {
         let c = |k: usize| self.color.iter().map(|p| p[k]).collect::<Vec<f32>>();
         write_exr_placed(
             path,
@@ -422,7 +422,7 @@ impl Film {
 
     /// The SPEC.md hit-position EXR (of the frame `frame`, when given:
     /// [`Placement::frame`]).
-    pub fn write_hits_exr(&self, path: &Path, frame: Option<u64>) -> Result<(), FilmError> {
+    pub fn write_hits_exr(&self, path: &Path, frame: Option<FrameId>) -> Result<(), FilmError> {
         write_exr_placed(
             path,
             self.width,
@@ -444,13 +444,101 @@ pub struct Placement {
     pub origin: [u32; 2],
     pub full: [u32; 2],
     /// The frame a part belongs to ([`crate::scene::Scene::frame_fingerprint`]),
-    /// written as the layer attribute [`FRAME_ATTRIBUTE`] (in hexadecimal),
+    /// written as the layer attribute [`FRAME_ATTRIBUTE`],
     /// so that `snell merge` refuses parts of different frames.
-    pub frame: Option<u64>,
+    pub frame: Option<FrameId>,
 }
 
 /// The EXR layer attribute that names a part's frame ([`Placement::frame`]).
 pub const FRAME_ATTRIBUTE: &str = "snellFrame";
+
+/// The aspects of a scene a [`FrameId`] hashes one by one, in the order its
+/// text lists them.
+pub const FRAME_ASPECTS: [&str; 6] = ["volume", "image", "camera", "surface", "backdrop", "render"];
+
+/// Which frame a part of a split render belongs to: a hash of the whole
+/// frame and one of each of its [`FRAME_ASPECTS`], so that a merge of parts
+/// from different frames can say what differs (a job that rendered its part
+/// with another ior names the surface, not two opaque numbers).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct FrameId {
+    pub hash: u64,
+    /// One hash per [`FRAME_ASPECTS`] entry; `None` for a part that carries
+    /// the whole frame's hash alone (written by snell before the aspects).
+    pub aspects: Option<[u64; FRAME_ASPECTS.len()]>,
+}
+
+impl FrameId {
+    /// The id of a frame whose aspects hash to `aspects`.
+    pub fn of_aspects(aspects: [u64; FRAME_ASPECTS.len()]) -> FrameId {
+        let mut h = crate::volume::WordHash::new();
+        for a in aspects {
+            h.add(a);
+        }
+        FrameId {
+            hash: h.value(),
+            aspects: Some(aspects),
+        }
+    }
+
+    /// The aspects whose hashes differ between `self` and `other`, when
+    /// both carry them.
+    pub fn differing(&self, other: &FrameId) -> Option<Vec<&'static str>> {
+        let (a, b) = (self.aspects?, other.aspects?);
+        Some(
+            FRAME_ASPECTS
+                .iter()
+                .zip(a.iter().zip(&b))
+                .filter(|(_, (x, y))| x != y)
+                .map(|(name, _)| *name)
+                .collect(),
+        )
+    }
+
+    /// Reads the attribute's text: the frame's hash in hexadecimal, then
+    /// `aspect=hash` for each of [`FRAME_ASPECTS`] in order (or nothing
+    /// more, as older parts were written). `None` for any other text.
+    pub fn parse(text: &str) -> Option<FrameId> {
+        let hex = |t: &str| {
+            (!t.is_empty() && t.len() <= 16 && t.bytes().all(|b| b.is_ascii_hexdigit()))
+                .then(|| u64::from_str_radix(t, 16).ok())
+                .flatten()
+        };
+        let mut words = text.split(' ');
+        let hash = hex(words.next()?)?;
+        let rest: Vec<&str> = words.collect();
+        if rest.is_empty() {
+            return Some(FrameId {
+                hash,
+                aspects: None,
+            });
+        }
+        if rest.len() != FRAME_ASPECTS.len() {
+            return None;
+        }
+        let mut aspects = [0; FRAME_ASPECTS.len()];
+        for ((slot, word), name) in aspects.iter_mut().zip(rest).zip(FRAME_ASPECTS) {
+            *slot = hex(word.strip_prefix(name)?.strip_prefix('=')?)?;
+        }
+        Some(FrameId {
+            hash,
+            aspects: Some(aspects),
+        })
+    }
+}
+
+impl std::fmt::Display for FrameId {
+    /// The attribute's text ([`FrameId::parse`] reads it back).
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "{:016x}", self.hash)?;
+        if let Some(aspects) = self.aspects {
+            for (name, a) in FRAME_ASPECTS.iter().zip(aspects) {
+                write!(f, " {name}={a:016x}")?;
+            }
+        }
+        Ok(())
+    }
+}
 
 impl HitImage {
     pub fn write_exr(&self, path: &Path) -> Result<(), FilmError> {
@@ -567,7 +655,7 @@ pub fn write_exr_placed(
     if let Some(frame) = at.frame {
         attributes.other.insert(
             Text::from(FRAME_ATTRIBUTE),
-            AttributeValue::Text(Text::from(format!("{frame:016x}").as_str())),
+            AttributeValue::Text(Text::from(frame.to_string().as_str())),
         );
     }
     let layer = Layer::new(
@@ -594,6 +682,48 @@ pub fn write_exr_placed(
 mod tests {
     use super::*;
     use crate::render::tile::tiles;
+
+    /// A frame id reads back from its text, an older part's bare hash
+    /// reads as a hash without aspects, and any other text is refused.
+    #[test]
+    fn frame_ids_read_back_and_name_what_differs() {
+        let a = FrameId::of_aspects([1, 2, 3, 4, 5, u64::MAX]);
+        let text = a.to_string();
+        assert!(
+            text.ends_with(
+                " surface=0000000000000004 backdrop=0000000000000005 render=ffffffffffffffff"
+            ),
+            "{text}"
+        );
+        assert_eq!(FrameId::parse(&text), Some(a));
+        let old = FrameId::parse("00ab");
+        assert_eq!(
+            old,
+            Some(FrameId {
+                hash: 0xab,
+                aspects: None
+            })
+        );
+        let b = FrameId::of_aspects([1, 2, 7, 4, 5, 0]);
+        assert_ne!(a.hash, b.hash);
+        assert_eq!(a.differing(&b), Some(vec!["camera", "render"]));
+        assert_eq!(a.differing(&a), Some(vec![]));
+        assert_eq!(a.differing(&old.unwrap()), None);
+        let words: Vec<&str> = text.split(' ').collect();
+        for bad in [
+            String::new(),
+            "xyz".into(),
+            "+1".into(),
+            "0123456789abcdef0".into(),
+            words[..3].join(" "),
+            format!("{text} extra=1"),
+            text.replace("camera=", "lens="),
+            text.replace("render=", "render:"),
+            text.replace(' ', "  "),
+        ] {
+            assert_eq!(FrameId::parse(&bad), None, "{bad:?}");
+        }
+    }
 
     /// A tile output whose every value says which pixel and tile it is.
     fn tile_out(region: Region, full_width: u32, tag: f32, colours: bool) -> TileOut<'static> {

@@ -44,6 +44,7 @@ use resolve::{phantom_spec, resolve, setting_message};
 use words::syntax_error;
 
 use crate::classify::Method;
+use crate::film::FrameId;
 use crate::filter::FilterKind;
 use crate::phantom::{PhantomError, PhantomSpec};
 use crate::volume::{LoadOptions, RawSpec, Volume, VolumeError};
@@ -558,7 +559,7 @@ impl Scene {
     /// same bits, `tests/accel.rs`; the step march does not). The parts of
     /// one frame (`render --region`) carry it, and `snell merge` refuses
     /// parts whose fingerprints differ.
-    pub fn frame_fingerprint(&self, volume_hash: u64) -> u64 {
+    pub fn frame_fingerprint(&self, volume_hash: u64) -> FrameId {
         let b = &self.backdrop;
         let pattern = match &b.pattern {
             Pattern::Checker { .. } => format!("{:?}", b.pattern),
@@ -593,27 +594,32 @@ impl Scene {
             render.classify = None;
             render.leaf = 0;
         }
-        let text = format!(
-            "{}x{} {:?} {:?} {:?} {:?} {:?} {:?} {:?} {pattern} {:?}",
-            self.width,
-            self.height,
-            self.background,
-            self.camera,
-            self.spacing,
-            self.surface,
-            b.center,
-            b.normal,
-            b.u_axis,
-            render
-        );
-        let mut h = crate::volume::WordHash::new();
-        h.add(volume_hash);
-        for word in text.as_bytes().chunks(8) {
-            let mut w = [0u8; 8];
-            w[..word.len()].copy_from_slice(word);
-            h.add(u64::from_le_bytes(w));
-        }
-        h.value()
+        // In the order of FRAME_ASPECTS.
+        let aspects = [
+            (volume_hash, format!("{:?}", self.spacing)),
+            (
+                0,
+                format!("{}x{} {:?}", self.width, self.height, self.background),
+            ),
+            (0, format!("{:?}", self.camera)),
+            (0, format!("{:?}", self.surface)),
+            (
+                0,
+                format!("{:?} {:?} {:?} {pattern}", b.center, b.normal, b.u_axis),
+            ),
+            (0, format!("{render:?}")),
+        ]
+        .map(|(seed, text)| {
+            let mut h = crate::volume::WordHash::new();
+            h.add(seed);
+            for word in text.as_bytes().chunks(8) {
+                let mut w = [0u8; 8];
+                w[..word.len()].copy_from_slice(word);
+                h.add(u64::from_le_bytes(w));
+            }
+            h.value()
+        });
+        FrameId::of_aspects(aspects)
     }
 }
 
@@ -1323,10 +1329,30 @@ checker = 8.0
                             same,
                             "{base:?} + {other}: unread {unread:?}"
                         );
+                        let named = before.differing(&after).unwrap();
+                        assert_eq!(named, if same { vec![] } else { vec!["render"] });
                     }
                 }
             }
         }
+        // Each other setting names its own aspect of the frame, and the
+        // volume's samples name the volume.
+        let base = print(&[]);
+        for (set, aspects) in [
+            ("surface.ior=1.7", &["surface"][..]),
+            ("surface.filter=linear", &["surface"]),
+            ("camera.fov_y=21.0", &["camera"]),
+            // The camera's aspect ratio follows the image's.
+            ("image.width=65", &["image", "camera"]),
+            ("backdrop.checker=3.0", &["backdrop"]),
+            ("volume.spacing=[1.0, 1.0, 2.0]", &["volume"]),
+        ] {
+            let after = print(&[set.to_string()]);
+            assert_eq!(base.differing(&after).unwrap(), aspects, "{set}");
+        }
+        let scene = Scene::parse(SCENE, Path::new("t.toml"), &[]).unwrap();
+        let other_volume = scene.frame_fingerprint(2);
+        assert_eq!(base.differing(&other_volume).unwrap(), vec!["volume"]);
     }
 
     /// Each anti-aliasing setting is reported where the supersampling mode
