@@ -392,7 +392,18 @@ impl Scene {
                     e => match culprit_override("volume.path", &self.overrides) {
                         Some(o) => SceneError::Override {
                             arg: o.clone(),
-                            msg: e.to_string(),
+                            msg: match &e {
+                                VolumeError::Io { path: file, source }
+                                    if source.kind() == std::io::ErrorKind::NotFound
+                                        && file == path =>
+                                {
+                                    format!(
+                                        "{}: no such file (a relative path given with --set is read from the working directory)",
+                                        file.display()
+                                    )
+                                }
+                                e => e.to_string(),
+                            },
                             over_limit: match e {
                                 VolumeError::OverLimit { source, .. } => Some(source),
                                 _ => None,
