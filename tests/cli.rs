@@ -937,6 +937,15 @@ fn first_use_messages_warnings_and_help() {
         e.contains("warning: --set render.supersampling, render.samples ignored: the reference traces the phantom's analytic spheres"),
         "{e}"
     );
+    // So of the settings inside a table it is given.
+    let e = from_root(&format!(
+        "reference {SPHERE} --hits {} {small} --set render={{samples=4,max_events=8}}",
+        t.path("ref.exr").display()
+    ));
+    assert!(
+        e.contains("warning: --set render.samples ignored: the reference traces"),
+        "{e}"
+    );
     // The same settings used: no warning.
     let e = render(
         " --set render.supersampling=footprint --set render.footprint=ewa \

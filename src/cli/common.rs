@@ -293,11 +293,12 @@ pub fn flags_given<const N: usize>(flags: [(&'static str, bool); N]) -> Vec<&'st
         .collect()
 }
 
-/// The keys `--set` wrote that `unread` names: the ones a command that
-/// reads less of a scene than a render warns of, in its own terms.
+/// The keys `--set` wrote that `unread` names, those inside a table
+/// value included: the ones a command that reads less of a scene than a
+/// render warns of, in its own terms.
 pub fn unread_sets(sets: &[String], unread: impl Fn(&str) -> bool) -> Vec<String> {
     sets.iter()
-        .map(|s| snell::scene::override_key(s))
+        .flat_map(|s| snell::scene::override_keys(s))
         .filter(|k| unread(k))
         .collect()
 }

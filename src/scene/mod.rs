@@ -32,7 +32,7 @@ use glam::DVec3;
 pub use backdrop::{Backdrop, Pattern, Texture};
 pub use camera::{Camera, CameraError, Projection};
 pub use orbit::{Orbit, OrbitError};
-pub use overrides::{apply_override, override_key};
+pub use overrides::{apply_override, override_key, override_keys};
 pub(crate) use resolve::setting_name;
 pub use settings::{
     FootprintFilter, PrssFallback, PrssMap, RenderSettings, Storage, Supersampling, Traversal,

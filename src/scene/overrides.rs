@@ -132,6 +132,24 @@ pub fn override_key(arg: &str) -> String {
     key.split('.').map(str::trim).collect::<Vec<_>>().join(".")
 }
 
+/// The keys an override writes: its own and, when its value is a table
+/// (`render={supersampling="prss"}`), every key inside it, dotted
+/// (`render.supersampling`), so a command that reads less of a scene can
+/// name each setting a table override sets.
+pub fn override_keys(arg: &str) -> Vec<String> {
+    let key = override_key(arg);
+    let mut keys = vec![key.clone()];
+    if let Some((_, value)) = arg.split_once('=')
+        && let Ok(mut t) = format!("v = {}", value.trim()).parse::<toml::Table>()
+        && let Some(toml::Value::Table(table)) = t.remove("v")
+    {
+        let mut inner = Vec::new();
+        written_keys(&table, &format!("{key}."), &mut inner);
+        keys.extend(inner.into_iter().map(|(k, _)| k));
+    }
+    keys
+}
+
 /// The override that wrote `key` or a table holding it (the last one, as
 /// the last wins in the table).
 pub(super) fn culprit_override<'a>(key: &str, overrides: &'a [String]) -> Option<&'a String> {
