@@ -15,6 +15,24 @@ pub fn num(x: f64) -> String {
     significant(x, 7, 1e-4..1e7)
 }
 
+/// `x` as [`num`] writes it, with more significant digits (up to 17) where
+/// 7 would not tell apart values `step` apart: the values of a volume
+/// whose range is narrow beside their magnitude (labels near 1234566, a
+/// pressure of 101325 ± 1) print as themselves, not all alike.
+pub fn num_resolving(x: f64, step: f64) -> String {
+    let digits = if x.is_finite() && x != 0.0 && step.is_finite() && step > 0.0 {
+        let needed = x.abs().log10().floor() - step.log10().floor() + 1.0;
+        needed.clamp(7.0, 17.0) as usize
+    } else {
+        7
+    };
+    if digits == 7 {
+        num(x)
+    } else {
+        significant(x, digits, 1e-4..10f64.powi(digits as i32))
+    }
+}
+
 /// `x` to 4 significant digits for tables of measurements: positional
 /// from 1e-3 to below 1e6 without trailing zeros (`0.2718`, `6.391`,
 /// `2072`), scientific beyond (`1.526e-5`); `0`, `inf`, `NaN` as such.
@@ -96,6 +114,19 @@ fn trim_fraction(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn num_resolving_tells_close_values_apart() {
+        assert_eq!(num_resolving(1234566.5, 1e-3), "1234566.5");
+        assert_eq!(num_resolving(1234567.0, 1e-3), "1234567");
+        assert_eq!(num_resolving(16777216.5, 1e-3), "16777216.5");
+        assert_eq!(num_resolving(101325.25, 1e-4), "101325.25");
+        // Where 7 digits resolve the step, as num writes it.
+        assert_eq!(num_resolving(127.5, 0.255), num(127.5));
+        assert_eq!(num_resolving(1.5e-30, 1e-33), num(1.5e-30));
+        assert_eq!(num_resolving(5.0, 0.0), "5");
+        assert_eq!(num_resolving(f64::NAN, 1.0), "NaN");
+    }
 
     #[test]
     fn sig4_keeps_four_digits() {

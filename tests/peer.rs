@@ -72,7 +72,7 @@ fn df3_round_trips_with_mirror_border() {
                         mirror(py as i64 - 1, 4),
                         mirror(pz as i64 - 1, 5),
                     );
-                    let v = vol.get(x, y, z) as f64;
+                    let v = vol.get(x, y, z);
                     let got = df3.samples[px + 5 * (py + 6 * pz)];
                     assert_eq!(got, m.quantize(v) as u32);
                     // The value comes back within half a count.

@@ -500,7 +500,7 @@ proptest! {
         for z in 0..dims[2] {
             for y in 0..dims[1] {
                 for x in 0..dims[0] {
-                    let want = vol.get(x, y, z) as f64;
+                    let want = vol.get(x, y, z);
                     let got = field.value(DVec3::new(x as f64, y as f64, z as f64));
                     prop_assert!(
                         (got - want).abs() <= 1e-9 * mag,

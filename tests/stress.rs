@@ -346,6 +346,34 @@ fn cases() -> Vec<Case> {
             },
         ),
         (
+            "offset: f64 sphere values + 101325 (a pressure's scale; iso 101325.5)",
+            "stored relative to an offset, as precise as the f32 values near the iso: events equal to the unshifted render on every pixel, p90 <= 1e-3 and p99 <= 0.05 squares",
+            || {
+                let v = sphere_volume(1.0);
+                let shifted: Vec<f64> = v.samples().iter().map(|&x| 101325.0 + x as f64).collect();
+                let vol = Volume::from_f64(v.dims(), [1.0; 3], SampleType::F64, &shifted).unwrap();
+                assert!(
+                    vol.offset() != 0.0,
+                    "f32 rounds these values: an offset is needed"
+                );
+                let f = render(&sphere(48, &["surface.iso=101325.5"]), Some(vol));
+                let one = render(&sphere(48, &[]), Some(v));
+                let c = cmp(&f, &one.film.hits());
+                assert!(
+                    c.events_equal_fraction == 1.0
+                        && c.squares(c.p90) <= 1e-3
+                        && c.squares(c.p99) <= 0.05,
+                    "{c:?}"
+                );
+                format!(
+                    "events equal {:.2}%, p90 {:.1e}, p99 {:.1e} squares",
+                    100.0 * c.events_equal_fraction,
+                    c.squares(c.p90),
+                    c.squares(c.p99)
+                )
+            },
+        ),
+        (
             "f16 coefficients of sphere values x 1e-9 (within f16's subnormals) and x 1e6 (beyond 65504)",
             "scaled into f16's normal range: events equal to the unscaled f16 render on >= 99.5%, p99 <= 1e-3 squares",
             || {

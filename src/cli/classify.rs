@@ -65,13 +65,13 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let reading = Step::named(format!("reading {}", a.volume.display()));
     let vol = progress::watch(&reading, false, || a.vol.load(&a.volume))?;
     let (lo, hi) = vol.value_range();
-    if !(a.iso >= lo as f64 && a.iso <= hi as f64) {
+    if !(a.iso >= lo && a.iso <= hi) {
         eprintln!(
             "warning: {}: iso-value {} is outside the data range [{}, {}]; few or no cells hold the surface",
             a.volume.display(),
             snell::human::exact(a.iso),
-            snell::human::num(lo as f64),
-            snell::human::num(hi as f64)
+            snell::human::num(lo),
+            snell::human::num(hi)
         );
     }
     let start = std::time::Instant::now();

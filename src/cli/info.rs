@@ -3,7 +3,7 @@
 use std::path::PathBuf;
 
 use clap::Args as ClapArgs;
-use snell::human::{num, triple as num3};
+use snell::human::{num_resolving, triple as num3};
 
 use super::common::{VolumeArgs, shell_path};
 
@@ -21,6 +21,9 @@ pub struct Args {
 pub fn run(a: Args) -> anyhow::Result<()> {
     let vol = a.vol.load(&a.volume)?;
     let st = vol.stats();
+    // Values to a thousandth of the range: a narrow range far from 0
+    // (labels near 1234566) prints with the digits that tell it apart.
+    let value = |x: f64| num_resolving(x, (st.max - st.min) / 1000.0);
     let d = vol.dims();
     let sp = vol.spacing();
     // The next step for a new dataset: a scene at the first iso-value worth
@@ -30,7 +33,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "snell scene {}{} -o scene.toml --iso {}",
             shell_path(&a.volume.to_string_lossy()),
             a.vol.flags(),
-            num(iso)
+            value(iso)
         )
     });
     if a.json {
@@ -66,14 +69,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     println!("  extent   {} (world units)", num3(vol.extent()));
     println!(
         "  range    {} .. {}  (mean {})",
-        num(st.min),
-        num(st.max),
-        num(st.mean)
+        value(st.min),
+        value(st.max),
+        value(st.mean)
     );
     if st.min == st.max {
         println!(
             "  every sample is {}: no iso-value has a surface in this volume",
-            num(st.min)
+            value(st.min)
         );
         return Ok(());
     }
@@ -92,9 +95,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         } else {
             0
         };
-        println!("    {:>12} {:>10} {}", num(lo), c, "#".repeat(bar));
+        println!("    {:>12} {:>10} {}", value(lo), c, "#".repeat(bar));
     }
-    let iso: Vec<String> = st.suggested_iso.iter().map(|&v| num(v)).collect();
+    let iso: Vec<String> = st.suggested_iso.iter().map(|&v| value(v)).collect();
     if st.iso_from_modes {
         // Each with the share of samples above it: past a half, the surface
         // bounds voids in a bulk (listed last).

@@ -188,7 +188,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     warn_far_camera(&a.scene, &scene, &prep.volume);
     let (lo, hi) = prep.volume.value_range();
     let iso = scene.surface.iso;
-    if !(iso >= lo as f64 && iso <= hi as f64) {
+    if !(iso >= lo && iso <= hi) {
         // Trilinear interpolation stays within the samples' range; the other
         // filters overshoot it next to sharp edges.
         let shows = if scene.surface.filter == snell::filter::FilterKind::Linear {
@@ -203,8 +203,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             "warning: {}: iso-value {} is outside the data range [{}, {}]; {shows}",
             a.scene.display(),
             snell::human::exact(iso),
-            snell::human::num(lo as f64),
-            snell::human::num(hi as f64)
+            snell::human::num(lo),
+            snell::human::num(hi)
         );
     }
     let renderer = Renderer {

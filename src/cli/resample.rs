@@ -64,14 +64,14 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     });
     let (lo, hi) = vol.value_range();
     if let Some((tlo, thi)) = snell::filter::resample::integer_range(ty)
-        && ((lo as f64) < tlo || (hi as f64) > thi)
+        && (lo < tlo || hi > thi)
     {
         let num = snell::human::num;
         eprintln!(
             "warning: {}: values [{}, {}] do not fit {} [{}, {}]: those beyond are clamped",
             a.volume.display(),
-            num(lo as f64),
-            num(hi as f64),
+            num(lo),
+            num(hi),
             ty.name(),
             num(tlo),
             num(thi)

@@ -146,6 +146,8 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             num(stats.min)
         );
     }
+    // As `snell info` prints them: to a thousandth of the range.
+    let value = |x: f64| snell::human::num_resolving(x, (stats.max - stats.min) / 1000.0);
     // Framed first: a volume that cannot be framed fails before anything
     // about its iso-value is said.
     let extent = vol.extent();
@@ -158,9 +160,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             if !(iso > stats.min && iso < stats.max) {
                 eprintln!(
                     "warning: --iso {}: not between the smallest and the largest sample ({} .. {}); the render will likely show only the backdrop",
-                    num(iso),
-                    num(stats.min),
-                    num(stats.max)
+                    value(iso),
+                    value(stats.min),
+                    value(stats.max)
                 );
             }
             iso
@@ -174,12 +176,12 @@ pub fn run(a: Args) -> anyhow::Result<()> {
             if stats.iso_from_modes {
                 eprintln!(
                     "iso {} (the lowest boundary between the histogram's modes that wraps an object rather than voids; `snell info` lists the others; --iso chooses)",
-                    num(iso)
+                    value(iso)
                 );
             } else {
                 eprintln!(
                     "warning: iso {} is the value range's midpoint: the histogram shows no two materials apart; try others with --iso",
-                    num(iso)
+                    value(iso)
                 );
             }
             iso
@@ -233,7 +235,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
         a.height,
         view.name(),
         num((fr.look_at - fr.position).length()),
-        num(iso),
+        value(iso),
         filter,
         num(fr.checker)
     );

@@ -125,9 +125,13 @@ pub struct Coeffs<T: Coefficient = f64> {
 
 impl<T: Coefficient> Coeffs<T> {
     /// The samples themselves, padded (coefficients of non-prefiltered kernels,
-    /// and the input of in-place prefiltering).
+    /// and the input of in-place prefiltering), their offset added back in
+    /// `f64` ([`Volume::offset`]).
     pub fn from_volume(vol: &Volume) -> Coeffs<T> {
-        Coeffs::from_interior(vol.dims(), vol.samples(), |v: &f32| T::from_f64(*v as f64))
+        let offset = vol.offset();
+        Coeffs::from_interior(vol.dims(), vol.samples(), |v: &f32| {
+            T::from_f64(offset + *v as f64)
+        })
     }
 
     /// A zeroed padded grid for `dims`, its pages advised huge, for the
@@ -385,7 +389,7 @@ mod tests {
             for j in -a..2 + a {
                 for i in -a..3 + a {
                     let expect = vol.get(mirror(i, 3), mirror(j, 2), mirror(k, 1));
-                    assert_eq!(c.data()[c.offset(i, j, k)], expect, "({i},{j},{k})");
+                    assert_eq!(c.data()[c.offset(i, j, k)] as f64, expect, "({i},{j},{k})");
                 }
             }
         }

@@ -122,7 +122,8 @@ impl Field<f32> {
         let coeffs = if prefilter.is_identity() {
             Coeffs::from_volume(vol)
         } else {
-            let mut work: Vec<f64> = vol.samples().iter().map(|&v| v as f64).collect();
+            let offset = vol.offset();
+            let mut work: Vec<f64> = vol.samples().iter().map(|&v| offset + v as f64).collect();
             prefilter.apply_3d(&mut work, vol.dims());
             Coeffs::from_interior(vol.dims(), &work, |v: &f64| *v as f32)
         };
@@ -907,7 +908,7 @@ mod tests {
             let f = Field::new(&vol, FilterKind::parse(name, 0.0).unwrap());
             for (x, y, z) in [(0, 0, 0), (5, 4, 6), (2, 3, 1), (3, 0, 6)] {
                 let v = f.value(DVec3::new(x as f64, y as f64, z as f64));
-                let s = vol.get(x, y, z) as f64;
+                let s = vol.get(x, y, z);
                 assert!((v - s).abs() < 1e-4, "{name} at ({x},{y},{z}): {v} vs {s}");
             }
         }

@@ -94,10 +94,16 @@ fn peak_bytes(n: [usize; 3], padded: [usize; 3], m: [usize; 3], support: usize) 
 
 /// The value stored for a sample of type `ty`: integers rounded and clamped
 /// to the type's range (interpolating filters overshoot near edges).
-fn store(ty: SampleType, v: f64) -> f32 {
-    match integer_range(ty) {
-        Some((lo, hi)) => v.round().clamp(lo, hi) as f32,
-        None => v as f32,
+fn store(ty: SampleType, v: f64, offset: f64) -> f32 {
+    let v = match integer_range(ty) {
+        Some((lo, hi)) => v.round().clamp(lo, hi),
+        None => v,
+    };
+    // No offset leaves the value's bits (`-0.0 - -0.0` would be `+0.0`).
+    if offset == 0.0 {
+        v as f32
+    } else {
+        (v - offset) as f32
     }
 }
 
@@ -159,8 +165,11 @@ pub fn resample(
         "resampling",
     )?;
     let field = Field::new(vol, kind);
+    // The new samples lie near the old ones' range: stored relative to the
+    // same offset, they keep the precision the old ones had.
+    let offset = vol.offset();
     let samples = crate::with_support!(field.kernel().support(), S => {
-        passes::<S>(field, n, dims, ty, count)
+        passes::<S>(field, n, dims, ty, count, offset)
     });
     let spacing: [f64; 3] = std::array::from_fn(|a| {
         if dims[a] == 1 {
@@ -169,7 +178,7 @@ pub fn resample(
             vol.spacing()[a] * (n[a] - 1) as f64 / (dims[a] - 1) as f64
         }
     });
-    Volume::new(dims, spacing, ty, samples)
+    Ok(Volume::new(dims, spacing, ty, samples)?.with_offset(offset))
 }
 
 /// The three separable passes (x over every padded row, y over every padded
@@ -180,6 +189,7 @@ fn passes<const S: usize>(
     m: [usize; 3],
     ty: SampleType,
     count: usize,
+    offset: f64,
 ) -> Vec<f32> {
     let [m0, m1, m2] = m;
     let (tx, ty_, tz) = (
@@ -231,7 +241,7 @@ fn passes<const S: usize>(
                     combine::<S>(&along_y, first * slice + y * m0, slice, w, &mut acc);
                     let d = &mut dst[dz * slice + y * m0..][..m0];
                     for (o, &v) in d.iter_mut().zip(&acc) {
-                        *o = store(ty, v);
+                        *o = store(ty, v, offset);
                     }
                 }
             }
@@ -271,7 +281,7 @@ mod tests {
             for j in 0..m[1] {
                 for i in 0..m[0] {
                     let want = field.value(point(i, j, k));
-                    let got = r.get(i, j, k) as f64;
+                    let got = r.get(i, j, k);
                     // The output is f32: its rounding, and the sums' order.
                     assert!(
                         (got - want).abs() <= 1e-6 * want.abs() + 1e-9,
@@ -358,7 +368,7 @@ mod tests {
                     let p = DVec3::new(i as f64, j as f64, k as f64) / 3.0;
                     let v = field.value(p);
                     (over, under) = (over || v > 255.5, under || v < -0.5);
-                    assert_eq!(u.get(i, j, k), v.round().clamp(0.0, 255.0) as f32);
+                    assert_eq!(u.get(i, j, k), v.round().clamp(0.0, 255.0));
                 }
             }
         }

@@ -125,8 +125,9 @@ impl Df3Mapping {
             )));
         }
         let (mut lo, mut hi, mut integral) = (f64::INFINITY, f64::NEG_INFINITY, true);
+        let offset = vol.offset();
         for &v in vol.samples() {
-            let v = v as f64;
+            let v = offset + v as f64;
             lo = lo.min(v);
             hi = hi.max(v);
             integral &= v.fract() == 0.0;
@@ -198,7 +199,7 @@ pub fn write_df3(path: &Path, vol: &Volume) -> Result<Df3Mapping, PeerError> {
                 row.clear();
                 for px in 0..fx {
                     let x = mirror(px as i64 - 1, nx);
-                    let c = m.quantize(vol.get(x, y, z) as f64);
+                    let c = m.quantize(vol.get(x, y, z));
                     row.extend_from_slice(&c.to_be_bytes());
                 }
                 w.write_all(&row)?;
@@ -357,10 +358,11 @@ pub fn max_gradient_sampled(
 ) -> f64 {
     let sub = sub.max(1);
     let [nx, ny, nz] = vol.dims();
+    let offset = vol.offset();
     let d: Vec<f64> = vol
         .samples()
         .par_iter()
-        .map(|&v| m.quantize(v as f64) as f64 / DF3_MAX)
+        .map(|&v| m.quantize(offset + v as f64) as f64 / DF3_MAX)
         .collect();
     let at = |x: usize, y: usize, z: usize| d[x + nx * (y + ny * z)];
     match interp {

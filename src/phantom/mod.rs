@@ -578,7 +578,11 @@ mod tests {
                         for x in 0..24 {
                             let p = [x as f64, y as f64, z as f64];
                             let want = format.encode(s.value(p) * scale);
-                            assert_eq!(v.get(x, y, z).to_bits(), want.to_bits(), "{p:?}");
+                            assert_eq!(
+                                v.get(x, y, z).to_bits(),
+                                f64::from(want).to_bits(),
+                                "{p:?}"
+                            );
                             skipped += far.is_some_and(|r| dist(p, c) > r) as usize;
                         }
                     }
@@ -646,7 +650,7 @@ mod tests {
         let v = m.build().unwrap();
         assert_eq!(v.dims(), [41; 3]);
         // At the grid centre (0,0,0): (1 - 0 + α(1 + cos(2π·6·1)))/(2(1+α)) = (1+2α)/(2+2α).
-        let c = v.get(20, 20, 20) as f64;
+        let c = v.get(20, 20, 20);
         assert!((c - 1.5 / 2.5).abs() < 1e-6, "{c}");
         // Off the centre, where every term counts: grid g ↦ -1 + 2g/40, the
         // ripple cos(2π·6·cos(πr/2)) of r = √(x² + y²), the slope -sin(πz/2).
@@ -660,7 +664,7 @@ mod tests {
             let want = (1.0 - (PI * z / 2.0).sin()
                 + 0.25 * (1.0 + (12.0 * PI * (PI * r / 2.0).cos()).cos()))
                 / 2.5;
-            let got = v.get(g[0], g[1], g[2]) as f64;
+            let got = v.get(g[0], g[1], g[2]);
             assert!((got - want).abs() < 1e-6, "{g:?}: {got} against {want}");
         }
         let (lo, hi) = v

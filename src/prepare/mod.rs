@@ -281,7 +281,10 @@ fn f32_field(vol: &Volume, filter: FilterKind, storage: Storage) -> Result<Field
         .par_chunks(1 << 16)
         .any(|chunk| chunk.iter().any(|c| !c.is_finite()));
     if overflows {
+        // As f32 (which holds them: these are the samples f32 overflows
+        // near), the shortest digits.
         let (lo, hi) = vol.value_range();
+        let (lo, hi) = (lo as f32, hi as f32);
         return Err(SceneError::Storage {
             storage: storage.name(),
             msg: format!(
@@ -304,7 +307,7 @@ fn f32_field(vol: &Volume, filter: FilterKind, storage: Storage) -> Result<Field
 /// alone, so a disk cache's file needs no record of it.
 pub(super) fn f16_scale(vol: &Volume, centre: f64) -> f64 {
     let (lo, hi) = vol.value_range();
-    let reach = (hi as f64 - centre).abs().max((lo as f64 - centre).abs());
+    let reach = (hi - centre).abs().max((lo - centre).abs());
     if !(reach.is_finite() && reach > 0.0) {
         return 1.0;
     }

@@ -34,8 +34,8 @@ use super::raw::{
     write_samples, zeroed_buffer,
 };
 use super::{
-    Endian, LoadOptions, SampleType, Volume, VolumeError, checked_sample_count, decode_samples,
-    limits,
+    Decoded, Endian, LoadOptions, SampleType, Volume, VolumeError, checked_sample_count,
+    decode_samples, limits,
 };
 
 /// A header longer than this is not a MetaImage header (binary data
@@ -91,7 +91,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     );
     // Errors name the header (the file the user gave), warnings the file
     // whose bytes they are about.
-    let (samples, replaced, mut warnings) = match &layout.data_file {
+    let (decoded, mut warnings) = match &layout.data_file {
         None => {
             let file = DataIn {
                 path,
@@ -117,14 +117,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             samples_in(path, file, &layout, need, count, opts, &what)?
         }
     };
-    let mut vol = finish_volume(
-        path,
-        layout.dims,
-        layout.spacing,
-        layout.ty,
-        samples,
-        replaced,
-    )?;
+    let mut vol = finish_volume(path, layout.dims, layout.spacing, layout.ty, decoded)?;
     warnings.extend(header.warnings.iter().cloned());
     warnings.extend(intensity_warning(path, &header));
     vol.warnings = warnings;
@@ -645,7 +638,7 @@ fn samples_in(
     count: usize,
     opts: &LoadOptions,
     what: &str,
-) -> Result<(Vec<f32>, usize, Vec<String>), VolumeError> {
+) -> Result<(Decoded, Vec<String>), VolumeError> {
     let DataIn { bytes, start, .. } = file;
     let len = bytes.len() as u64;
     let from = match layout.header_size {
@@ -692,8 +685,7 @@ fn samples_in(
         if after > 0 {
             warnings.push(super::gzip::after_samples(file.path, after, count, false));
         }
-        let (samples, replaced) = decode(data)?;
-        return Ok((samples, replaced, warnings));
+        return Ok((decode(data)?, warnings));
     }
     let available = len - from;
     let zsize = match layout.compressed_size {
@@ -744,8 +736,7 @@ fn samples_in(
             file.path.display()
         ));
     }
-    let (samples, replaced) = decode(&buf)?;
-    Ok((samples, replaced, warnings))
+    Ok((decode(&buf)?, warnings))
 }
 
 #[cfg(test)]

@@ -232,7 +232,14 @@ pub struct Volume {
     dims: [usize; 3],
     spacing: [f64; 3],
     native: SampleType,
+    /// The samples less [`Volume::offset`], rounded to `f32`.
     samples: Vec<f32>,
+    /// What every stored sample is relative to: 0 unless the file's values
+    /// do not all fit `f32` exactly (`f64`, `u32`, `i32` data, or a NIfTI
+    /// scaling), when it is their range's midpoint, so `f32` keeps their
+    /// differences (pressures of 101325 ± 1 Pa, labels above 2²⁴) instead of
+    /// rounding them to steps as coarse as the values are large.
+    offset: f64,
     /// Non-finite samples that were replaced on load (`--allow-nan`).
     pub replaced_nonfinite: usize,
     /// What the reader accepted but the user should hear about (bytes after
@@ -268,9 +275,37 @@ impl Volume {
             spacing,
             native,
             samples,
+            offset: -0.0,
             replaced_nonfinite: 0,
             warnings: Vec::new(),
         })
+    }
+
+    /// The volume whose samples are `offset` plus the ones it holds
+    /// ([`Volume::offset`]; a non-finite offset is taken as 0).
+    pub fn with_offset(mut self, offset: f64) -> Volume {
+        // No offset is -0.0, not 0.0: `x + -0.0 == x` bit for bit for every
+        // x, -0.0 included, so adding it back leaves a sample as stored.
+        self.offset = if offset.is_finite() && offset != 0.0 {
+            offset
+        } else {
+            -0.0
+        };
+        self
+    }
+
+    /// A volume from samples in `f64`, stored as [`decode_samples`] stores
+    /// a file's: exactly when `f32` holds them all, else relative to their
+    /// range's midpoint (resampled `f64` data keeps its precision).
+    pub fn from_f64(
+        dims: [usize; 3],
+        spacing: [f64; 3],
+        native: SampleType,
+        values: &[f64],
+    ) -> Result<Volume, VolumeError> {
+        let offset = f32_offset(values.iter().copied());
+        let samples = values.iter().map(|&v| (v - offset) as f32).collect();
+        Ok(Volume::new(dims, spacing, native, samples)?.with_offset(offset))
     }
 
     pub fn dims(&self) -> [usize; 3] {
@@ -282,8 +317,15 @@ impl Volume {
     pub fn native_type(&self) -> SampleType {
         self.native
     }
+    /// The samples as stored: less [`Volume::offset`] (which is 0 for
+    /// every volume whose values `f32` holds exactly).
     pub fn samples(&self) -> &[f32] {
         &self.samples
+    }
+    /// What [`Volume::samples`] are relative to (-0.0 for none: adding it
+    /// changes no sample, not even -0.0).
+    pub fn offset(&self) -> f64 {
+        self.offset
     }
     pub fn len(&self) -> usize {
         self.samples.len()
@@ -304,8 +346,9 @@ impl Volume {
         x + self.dims[0] * (y + self.dims[1] * z)
     }
 
-    pub fn get(&self, x: usize, y: usize, z: usize) -> f32 {
-        self.samples[self.index(x, y, z)]
+    /// The sample at `(x, y, z)`, its offset added back.
+    pub fn get(&self, x: usize, y: usize, z: usize) -> f64 {
+        self.offset + self.samples[self.index(x, y, z)] as f64
     }
 
     /// World-space extent of the domain: `(n-1) × spacing` per axis.
@@ -314,12 +357,14 @@ impl Volume {
     }
 
     /// The smallest and largest sample (infinities for no samples).
-    pub fn value_range(&self) -> (f32, f32) {
-        self.samples
+    pub fn value_range(&self) -> (f64, f64) {
+        let (lo, hi) = self
+            .samples
             .iter()
             .fold((f32::INFINITY, f32::NEG_INFINITY), |(l, h), &v| {
                 (l.min(v), h.max(v))
-            })
+            });
+        (self.offset + lo as f64, self.offset + hi as f64)
     }
 
     /// Value range, histogram and suggested iso-values.
@@ -339,6 +384,11 @@ impl Volume {
             h.add(sp.to_bits());
         }
         h.add(self.native as u64);
+        // Only where there is one, so the hashes of the volumes without
+        // (every one before offsets) are as they were.
+        if self.offset != 0.0 {
+            h.add(self.offset.to_bits());
+        }
         let mut pairs = self.samples.chunks_exact(2);
         for p in &mut pairs {
             h.add(p[0].to_bits() as u64 | (p[1].to_bits() as u64) << 32);
@@ -477,8 +527,45 @@ pub fn checked_sample_count(
     Ok(n)
 }
 
+/// What [`f32`] samples of `values` should be stored relative to: the
+/// midpoint of their range where `f32` rounds some of them and the range is
+/// narrow beside their magnitude (under half the largest), so relative to
+/// it they round far more finely (see [`Volume::offset`]); a whole number
+/// for whole values, so labels stay whole. Otherwise 0: where `f32` holds
+/// every value exactly, where the range reaches near 0 (an offset would
+/// round the values near 0 more coarsely than `f32` rounds the largest),
+/// and where a value lies beyond `f32`'s range (refused by the readers).
+pub fn f32_offset(values: impl Iterator<Item = f64>) -> f64 {
+    let (mut lo, mut hi) = (f64::INFINITY, f64::NEG_INFINITY);
+    let (mut exact, mut whole) = (true, true);
+    for v in values.filter(|v| v.is_finite()) {
+        lo = lo.min(v);
+        hi = hi.max(v);
+        exact &= (v as f32) as f64 == v;
+        whole &= v.fract() == 0.0;
+    }
+    let largest = lo.abs().max(hi.abs());
+    if exact || lo > hi || largest > f32::MAX as f64 || hi - lo >= largest / 2.0 {
+        return 0.0;
+    }
+    // Halved first: the sum of two values near f64::MAX overflows.
+    let mid = lo / 2.0 + hi / 2.0;
+    if whole { mid.round() } else { mid }
+}
+
+/// Decoded samples: `f32` values relative to `offset` ([`Volume::offset`]),
+/// and how many non-finite ones were replaced.
+#[derive(Debug)]
+pub struct Decoded {
+    pub samples: Vec<f32>,
+    pub offset: f64,
+    pub replaced: usize,
+}
+
 /// Decodes `count` samples of `ty` in `endian` order from `bytes` into `f32`,
-/// applying `value = raw * slope + inter` when a scaling is given (NIfTI).
+/// applying `value = raw * slope + inter` when a scaling is given (NIfTI),
+/// relative to an offset where `f32` cannot hold the values exactly
+/// ([`f32_offset`]).
 /// Non-finite results are counted and either rejected or replaced per `opts`.
 pub fn decode_samples(
     path: &Path,
@@ -488,7 +575,7 @@ pub fn decode_samples(
     count: usize,
     scale: Option<(f64, f64)>,
     allow_nan: bool,
-) -> Result<(Vec<f32>, usize), VolumeError> {
+) -> Result<Decoded, VolumeError> {
     let need = (count as u64) * ty.size() as u64;
     if (bytes.len() as u64) < need {
         return Err(VolumeError::Truncated {
@@ -511,6 +598,10 @@ pub fn decode_samples(
     // samples fit f32 whatever they are, and skip the test (a 512³ u16
     // volume loads 10% faster without it).
     let may_overflow = ty == SampleType::F64 || scale.is_some();
+    // Only these can hold values f32 rounds; the others are stored exactly
+    // without a first pass to find out.
+    let may_round = may_overflow || matches!(ty, SampleType::I32 | SampleType::U32);
+    let mut offset = 0.0;
     let (mut beyond, mut first_beyond) = (0usize, (usize::MAX, 0.0f64));
     macro_rules! dec {
         ($t:ty, $n:expr) => {{
@@ -522,20 +613,23 @@ pub fn decode_samples(
                 };
                 v as f64 * slope + inter
             };
+            if may_round {
+                offset = f32_offset(bytes.chunks_exact($n).map(value));
+            }
             if may_overflow {
                 for c in bytes.chunks_exact($n) {
-                    let w = value(c);
+                    let w = value(c) - offset;
                     let x = w as f32;
                     if x.is_infinite() && w.is_finite() {
                         if beyond == 0 {
-                            first_beyond = (out.len(), w);
+                            first_beyond = (out.len(), w + offset);
                         }
                         beyond += 1;
                     }
                     out.push(x);
                 }
             } else {
-                out.extend(bytes.chunks_exact($n).map(|c| value(c) as f32));
+                out.extend(bytes.chunks_exact($n).map(|c| (value(c) - offset) as f32));
             }
         }};
     }
@@ -583,7 +677,11 @@ pub fn decode_samples(
         }
         replace_nonfinite(&mut out);
     }
-    Ok((out, bad))
+    Ok(Decoded {
+        samples: out,
+        offset,
+        replaced: bad,
+    })
 }
 
 /// Replaces NaN and -inf by the smallest finite sample and +inf by the largest,
@@ -732,10 +830,66 @@ mod tests {
         std::fs::remove_dir_all(&dir).unwrap();
     }
 
+    /// Values f32 would round (labels above 2²⁴, f64 data far from 0) are
+    /// stored relative to an offset that keeps their differences; values it
+    /// holds exactly keep offset 0, bit for bit as before.
+    #[test]
+    fn samples_f32_would_round_keep_their_differences() {
+        let p = Path::new("x");
+        let labels: Vec<u8> = [16_777_216u32, 16_777_217, 16_777_300]
+            .iter()
+            .flat_map(|v| v.to_le_bytes())
+            .collect();
+        let d =
+            decode_samples(p, &labels, SampleType::U32, Endian::Little, 3, None, false).unwrap();
+        assert!(d.offset != 0.0);
+        let vol = Volume::new([3, 1, 1], [1.0; 3], SampleType::U32, d.samples)
+            .unwrap()
+            .with_offset(d.offset);
+        let got: Vec<f64> = (0..3).map(|x| vol.get(x, 0, 0)).collect();
+        assert_eq!(got, [16_777_216.0, 16_777_217.0, 16_777_300.0]);
+        assert_eq!(vol.value_range(), (16_777_216.0, 16_777_300.0));
+        // f64 data: a pressure field 101325 + [0, 1).
+        let values: [f64; 3] = [101325.0, 101325.25, 101325.5 + 1e-6];
+        let bytes: Vec<u8> = values.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let d = decode_samples(p, &bytes, SampleType::F64, Endian::Little, 3, None, false).unwrap();
+        let vol = Volume::new([3, 1, 1], [1.0; 3], SampleType::F64, d.samples)
+            .unwrap()
+            .with_offset(d.offset);
+        for (x, want) in values.iter().enumerate() {
+            assert!((vol.get(x, 0, 0) - want).abs() < 1e-7, "{x}");
+        }
+        let stats = vol.stats();
+        assert!((stats.max - values[2]).abs() < 1e-7 && (stats.min - values[0]).abs() < 1e-7);
+        // Written and read back (NRRD, f64): the same values.
+        let dir = std::env::temp_dir().join(format!("snell-offset-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let file = dir.join("o.nrrd");
+        write(&file, &vol, false).unwrap();
+        let back = load(&file, &LoadOptions::default()).unwrap();
+        for x in 0..3 {
+            assert!((back.get(x, 0, 0) - values[x]).abs() < 1e-7, "{x}");
+        }
+        std::fs::remove_dir_all(&dir).unwrap();
+        // Exactly held values: no offset, whatever the type.
+        for (ty, bytes) in [
+            (SampleType::U32, 16_777_216u32.to_le_bytes().to_vec()),
+            (SampleType::F64, 0f64.to_le_bytes().to_vec()),
+        ] {
+            let n = bytes.len() / ty.size();
+            let d = decode_samples(p, &bytes, ty, Endian::Little, n, None, false).unwrap();
+            assert_eq!(d.offset, 0.0, "{ty}");
+        }
+        let exact = [f64::from(0.1f32), 3.0];
+        let bytes: Vec<u8> = exact.iter().flat_map(|v| v.to_le_bytes()).collect();
+        let d = decode_samples(p, &bytes, SampleType::F64, Endian::Little, 2, None, false).unwrap();
+        assert_eq!((d.offset, d.samples), (0.0, vec![0.1f32, 3.0]));
+    }
+
     #[test]
     fn decode_big_endian_u16_and_scaling() {
         let bytes = [0x01u8, 0x02, 0xff, 0xff];
-        let (v, bad) = decode_samples(
+        let d = decode_samples(
             Path::new("x"),
             &bytes,
             SampleType::U16,
@@ -745,8 +899,11 @@ mod tests {
             false,
         )
         .unwrap();
-        assert_eq!(bad, 0);
-        assert_eq!(v, vec![(0x0102 * 2 + 1) as f32, (65535 * 2 + 1) as f32]);
+        assert_eq!((d.replaced, d.offset), (0, 0.0));
+        assert_eq!(
+            d.samples,
+            vec![(0x0102 * 2 + 1) as f32, (65535 * 2 + 1) as f32]
+        );
     }
 
     /// Finite f64 samples (or scaled ones) beyond f32's range are refused
@@ -815,10 +972,9 @@ mod tests {
             decode_samples(p, &bytes, SampleType::F32, Endian::Little, 4, None, false).unwrap_err();
         let msg = err.to_string();
         assert!(msg.contains("f.raw") && msg.contains("1 NaN") && msg.contains("first at index 1"));
-        let (v, bad) =
-            decode_samples(p, &bytes, SampleType::F32, Endian::Little, 4, None, true).unwrap();
-        assert_eq!(bad, 2);
-        assert_eq!(v, vec![1.0, 1.0, 3.0, 3.0]);
+        let d = decode_samples(p, &bytes, SampleType::F32, Endian::Little, 4, None, true).unwrap();
+        assert_eq!(d.replaced, 2);
+        assert_eq!(d.samples, vec![1.0, 1.0, 3.0, 3.0]);
     }
 
     #[test]

@@ -77,8 +77,7 @@ fn decode(
     bytes: &[u8],
     opts: &LoadOptions,
 ) -> Result<Volume, VolumeError> {
-    let (samples, replaced) =
-        decode_samples(path, bytes, h.ty, h.endian, count, h.scale, opts.allow_nan)?;
+    let decoded = decode_samples(path, bytes, h.ty, h.endian, count, h.scale, opts.allow_nan)?;
     // Scaled samples are real numbers, whatever the stored integers were: a
     // u16 CT with `scl_inter = -1024` holds negative values, which `snell
     // resample` would clamp to 0 if the volume still called itself u16.
@@ -87,7 +86,7 @@ fn decode(
     } else {
         h.ty
     };
-    finish_volume(path, h.dims, h.spacing, ty, samples, replaced)
+    finish_volume(path, h.dims, h.spacing, ty, decoded)
 }
 
 /// Uncompressed: decode straight from a map of the file. Bytes after the image

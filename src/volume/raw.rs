@@ -19,8 +19,8 @@ use std::path::Path;
 use memmap2::Mmap;
 
 use super::{
-    LoadOptions, RawSpec, SampleType, Volume, VolumeError, check_spacing, checked_sample_count,
-    decode_samples,
+    Decoded, LoadOptions, RawSpec, SampleType, Volume, VolumeError, check_spacing,
+    checked_sample_count, decode_samples,
 };
 
 /// Reads a headerless volume described by `spec`.
@@ -71,9 +71,8 @@ pub fn read(path: &Path, spec: &RawSpec, opts: &LoadOptions) -> Result<Volume, V
         got: map.len() as u64,
         what: format!("{nx}x{ny}x{nz} samples of {ty}"),
     })?;
-    let (samples, replaced) =
-        decode_samples(path, bytes, ty, spec.endian, count, None, opts.allow_nan)?;
-    finish_volume(path, spec.dims, spec.spacing, ty, samples, replaced)
+    let decoded = decode_samples(path, bytes, ty, spec.endian, count, None, opts.allow_nan)?;
+    finish_volume(path, spec.dims, spec.spacing, ty, decoded)
 }
 
 /// Explains a file longer than `spec` says, suggesting the dims (or sample
@@ -219,12 +218,12 @@ pub(super) fn finish_volume(
     dims: [usize; 3],
     spacing: [f64; 3],
     ty: SampleType,
-    samples: Vec<f32>,
-    replaced: usize,
+    decoded: Decoded,
 ) -> Result<Volume, VolumeError> {
-    let mut vol = Volume::new(dims, spacing, ty, samples)
-        .map_err(|e| VolumeError::format(path, e.to_string()))?;
-    vol.replaced_nonfinite = replaced;
+    let mut vol = Volume::new(dims, spacing, ty, decoded.samples)
+        .map_err(|e| VolumeError::format(path, e.to_string()))?
+        .with_offset(decoded.offset);
+    vol.replaced_nonfinite = decoded.replaced;
     Ok(vol)
 }
 
@@ -299,12 +298,12 @@ pub(super) fn zeroed_buffer(path: &Path, len: usize) -> Result<Vec<u8>, VolumeEr
 /// Streams the samples in the native type, little endian, in chunks so no
 /// second copy of the volume is built.
 pub(super) fn write_samples<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
-    let ty = vol.native_type();
+    let (ty, offset) = (vol.native_type(), vol.offset());
     let mut buf: Vec<u8> = Vec::with_capacity(64 * 1024);
     for chunk in vol.samples().chunks(8192) {
         buf.clear();
         for &v in chunk {
-            encode_sample(ty, v, &mut buf);
+            encode_sample(ty, offset + v as f64, &mut buf);
         }
         out.write_all(&buf)?;
     }
@@ -314,7 +313,7 @@ pub(super) fn write_samples<W: Write>(out: &mut W, vol: &Volume) -> io::Result<(
 /// One sample in the native type. Integer volumes hold integral values, so the
 /// rounding only guards against samples edited after loading; `as` saturates
 /// out-of-range values (and maps NaN to 0), which is the clamp we want.
-pub(super) fn encode_sample(ty: SampleType, v: f32, out: &mut Vec<u8>) {
+pub(super) fn encode_sample(ty: SampleType, v: f64, out: &mut Vec<u8>) {
     match ty {
         SampleType::I8 => out.extend_from_slice(&(v.round() as i8).to_le_bytes()),
         SampleType::U8 => out.extend_from_slice(&(v.round() as u8).to_le_bytes()),
@@ -322,8 +321,8 @@ pub(super) fn encode_sample(ty: SampleType, v: f32, out: &mut Vec<u8>) {
         SampleType::U16 => out.extend_from_slice(&(v.round() as u16).to_le_bytes()),
         SampleType::I32 => out.extend_from_slice(&(v.round() as i32).to_le_bytes()),
         SampleType::U32 => out.extend_from_slice(&(v.round() as u32).to_le_bytes()),
-        SampleType::F32 => out.extend_from_slice(&v.to_le_bytes()),
-        SampleType::F64 => out.extend_from_slice(&f64::from(v).to_le_bytes()),
+        SampleType::F32 => out.extend_from_slice(&(v as f32).to_le_bytes()),
+        SampleType::F64 => out.extend_from_slice(&v.to_le_bytes()),
     }
 }
 
@@ -338,7 +337,7 @@ mod tests {
         encode_sample(SampleType::U8, 300.0, &mut out);
         encode_sample(SampleType::U8, -3.0, &mut out);
         encode_sample(SampleType::I8, 2.6, &mut out);
-        encode_sample(SampleType::U16, f32::NAN, &mut out);
+        encode_sample(SampleType::U16, f64::NAN, &mut out);
         assert_eq!(out, vec![255, 0, 3, 0, 0]);
     }
 

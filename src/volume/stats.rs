@@ -42,6 +42,8 @@ pub struct VolumeStats {
 }
 
 impl VolumeStats {
+    /// Computed on the stored samples, whose differences are exact, then
+    /// shifted by the volume's offset ([`Volume::offset`]).
     pub fn compute(vol: &Volume) -> VolumeStats {
         let s = vol.samples();
         let (mut lo, mut hi, mut sum) = (f64::INFINITY, f64::NEG_INFINITY, 0.0f64);
@@ -73,13 +75,18 @@ impl VolumeStats {
         let mut ranked: Vec<(f64, f64)> = suggested_iso.into_iter().zip(above).collect();
         // Stable: each kind keeps its ascending order.
         ranked.sort_by_key(|&(_, share)| share > 0.5);
-        let (suggested_iso, suggested_above) = ranked.into_iter().unzip();
+        let (suggested_iso, suggested_above): (Vec<f64>, _) = ranked.into_iter().unzip();
+        let off = vol.offset();
         VolumeStats {
-            min: lo,
-            max: hi,
-            mean,
-            histogram,
-            suggested_iso,
+            min: off + lo,
+            max: off + hi,
+            mean: off + mean,
+            histogram: Histogram {
+                min: off + histogram.min,
+                max: off + histogram.max,
+                ..histogram
+            },
+            suggested_iso: suggested_iso.into_iter().map(|v| off + v).collect(),
             suggested_above,
             iso_from_modes,
         }

@@ -91,7 +91,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     );
 
     let decode = |bytes: &[u8]| {
-        let (samples, replaced) = decode_samples(
+        let decoded = decode_samples(
             path,
             bytes,
             layout.ty,
@@ -100,14 +100,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
             None,
             opts.allow_nan,
         )?;
-        finish_volume(
-            path,
-            layout.dims,
-            layout.spacing,
-            layout.ty,
-            samples,
-            replaced,
-        )
+        finish_volume(path, layout.dims, layout.spacing, layout.ty, decoded)
     };
 
     let open = |data_path: &Path| {
@@ -326,7 +319,7 @@ fn nrrd_type_name(ty: SampleType) -> &'static str {
 /// The samples as decimal text in the native type, one row along x per
 /// line; floats in their shortest form that reads back to the same bits.
 fn write_text<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
-    let ty = vol.native_type();
+    let (ty, offset) = (vol.native_type(), vol.offset());
     let mut line = String::new();
     for row in vol.samples().chunks(vol.dims()[0].max(1)) {
         line.clear();
@@ -334,6 +327,7 @@ fn write_text<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
             if i > 0 {
                 line.push(' ');
             }
+            let v = offset + v as f64;
             // Integers as the raw encoding would store them.
             let text = match ty {
                 SampleType::I8 => (v.round() as i8).to_string(),
@@ -342,8 +336,8 @@ fn write_text<W: Write>(out: &mut W, vol: &Volume) -> io::Result<()> {
                 SampleType::U16 => (v.round() as u16).to_string(),
                 SampleType::I32 => (v.round() as i32).to_string(),
                 SampleType::U32 => (v.round() as u32).to_string(),
-                SampleType::F32 => v.to_string(),
-                SampleType::F64 => f64::from(v).to_string(),
+                SampleType::F32 => (v as f32).to_string(),
+                SampleType::F64 => v.to_string(),
             };
             line.push_str(&text);
         }
