@@ -79,28 +79,15 @@ fn describe_cpu(cpuinfo: &str) -> Option<String> {
     })
 }
 
-/// The working tree's revision, so a table can be traced to its code:
-/// the commit, with `-dirty` when a tracked file other than Markdown
-/// differs from it. Documentation is left out because `--update` itself
-/// rewrites BENCHMARKS.md: a second run would otherwise be marked as
-/// measuring changed code when only its predecessor's table changed.
+/// The commit the binary was built from (`build.rs`), so a table can be
+/// traced to its code: with `-dirty` when a tracked file other than
+/// Markdown differed from it at the build (documentation is left out
+/// because `--update` itself rewrites BENCHMARKS.md). `None` for a build
+/// outside a git checkout.
 fn git_describe() -> Option<String> {
-    let git = |args: &[&str]| {
-        std::process::Command::new("git")
-            .args(args)
-            .stderr(std::process::Stdio::null())
-            .output()
-            .ok()
-    };
-    let out = git(&["describe", "--always"])?;
-    let s = String::from_utf8(out.stdout).ok()?.trim().to_string();
-    if !out.status.success() || s.is_empty() {
-        return None;
-    }
-    // `git diff --quiet` exits 1 when the filtered tree differs.
-    let code_changed = git(&["diff", "--quiet", "HEAD", "--", ":/", ":(top,exclude)*.md"])
-        .is_some_and(|o| o.status.code() == Some(1));
-    Some(if code_changed { s + "-dirty" } else { s })
+    Some(env!("SNELL_GIT"))
+        .filter(|s| !s.is_empty())
+        .map(String::from)
 }
 
 /// A `Key:   123 kB` field of a `/proc` status-like file, in KiB.

@@ -245,7 +245,18 @@ fn draw_time_vs_error<DB: DrawingBackend>(
         &markers,
         ((xr.start, yr.start), (xr.end, yr.end)),
     );
-    for ((p, _), at) in labelled.iter().zip(spots) {
+    for (((p, anchor), at), (w, h)) in labelled.iter().zip(spots).zip(&sizes) {
+        // A leader from the point to its label's nearest edge: a label
+        // pushed aside by others can sit nearer another point than its own.
+        let edge = (
+            anchor.0.clamp(at.0, at.0 + w),
+            anchor.1.clamp(at.1, at.1 + h),
+        );
+        area.draw(&PathElement::new(
+            vec![*anchor, edge],
+            BLACK.mix(0.35).stroke_width(1),
+        ))
+        .map_err(err)?;
         area.draw(&Text::new(p.label.clone(), at, font.clone()))
             .map_err(err)?;
     }

@@ -337,7 +337,11 @@ equal: pixels whose ray met as many interfaces as the reference's.",
     if quality {
         s.push_str(" PSNR/SSIM: colour image against a 16×16 grid-supersampled render.");
     }
-    s.push_str(" Peak MiB: the process's peak resident set during the configuration.\n\n");
+    s.push_str(
+        " Peak MiB: the process's peak resident set during the configuration, which includes \
+         what the configurations before it left cached (volumes, coefficients, tags): a \
+         configuration's own peak is what `snell render --stats` reports as peak_rss_mib.\n\n",
+    );
 
     // Details: stages and counters.
     s.push_str("<details><summary>CPU time per stage (ms, median run, summed over threads) and work per ray</summary>\n\n");

@@ -37,8 +37,9 @@ pub struct Machine {
     pub snell_version: String,
     /// `release` or `debug`: debug timings mean nothing.
     pub build_profile: String,
-    /// `git describe --always` of the working directory, with `-dirty`
-    /// when code (not Markdown) differs from it, if in a repository.
+    /// `git describe --always` of the checkout the binary was built from,
+    /// with `-dirty` when code (not Markdown) differed from it then; `None`
+    /// for a build outside a git checkout.
     pub git: Option<String>,
 }
 
@@ -147,8 +148,10 @@ pub struct Settings {
 /// Wall times of the timed runs (`Frame.stats.wall`).
 #[derive(Clone, Debug, Serialize)]
 pub struct TimeStats {
-    /// The median run's time (the lower middle one for an even count, so it
-    /// is a run that happened and the per-run figures come from it).
+    /// The median of the runs' times: for an even count the mean of the
+    /// middle two (the lower one would be the minimum of two runs, biasing
+    /// the time down). The per-run figures shown with it (stage times,
+    /// counters) come from the lower middle run, one that happened.
     pub median: f64,
     pub min: f64,
     pub max: f64,
@@ -163,10 +166,16 @@ impl TimeStats {
         }
         let mut order: Vec<usize> = (0..times.len()).collect();
         order.sort_by(|&a, &b| times[a].total_cmp(&times[b]));
-        let mid = order[(times.len() - 1) / 2];
+        let n = times.len();
+        let mid = order[(n - 1) / 2];
+        let median = if n % 2 == 1 {
+            times[mid]
+        } else {
+            0.5 * (times[mid] + times[order[n / 2]])
+        };
         Some((
             TimeStats {
-                median: times[mid],
+                median,
                 min: times[order[0]],
                 max: times[order[times.len() - 1]],
                 all: times.to_vec(),
@@ -485,5 +494,22 @@ pub(crate) fn sample_report() -> Report {
             seconds: 0.5,
         }],
         warnings: vec!["a warning".into()],
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Two runs' median is their mean, not the faster one; the per-run
+    /// figures come from the lower middle run.
+    #[test]
+    fn medians_of_even_counts_are_the_middle_pairs_mean() {
+        let (s, mid) = TimeStats::of(&[126.5, 101.5]).unwrap();
+        assert_eq!((s.median, mid, s.min, s.max), (114.0, 1, 101.5, 126.5));
+        let (s, mid) = TimeStats::of(&[3.0, 1.0, 2.0]).unwrap();
+        assert_eq!((s.median, mid), (2.0, 2));
+        let (s, mid) = TimeStats::of(&[4.0, 1.0, 2.0, 3.0]).unwrap();
+        assert_eq!((s.median, mid), (2.5, 2));
     }
 }

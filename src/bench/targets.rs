@@ -689,17 +689,10 @@ fn judged(opts: &TargetOptions) -> bool {
     opts.size == TARGET_SIZE && opts.threads == TARGET_THREADS
 }
 
-/// The median of the rounds, the mean of the middle two for an even count:
-/// a target's value is a statistic of its rounds, not one of them (unlike
-/// [`super::results::TimeStats::of`], which picks a frame so that its stats
-/// can be shown with it).
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    match v.len() {
-        0 => f64::NAN,
-        n if n % 2 == 1 => v[n / 2],
-        n => 0.5 * (v[n / 2 - 1] + v[n / 2]),
-    }
+/// The median of the rounds, the mean of the middle two for an even count
+/// ([`super::results::TimeStats::of`]'s).
+fn median(v: Vec<f64>) -> f64 {
+    super::results::TimeStats::of(&v).map_or(f64::NAN, |(s, _)| s.median)
 }
 
 fn list(v: &[f64], f: impl Fn(f64) -> String) -> String {
