@@ -234,11 +234,13 @@ pub struct Volume {
     native: SampleType,
     /// The samples less [`Volume::offset`], rounded to `f32`.
     samples: Vec<f32>,
-    /// What every stored sample is relative to: 0 unless the file's values
-    /// do not all fit `f32` exactly (`f64`, `u32`, `i32` data, or a NIfTI
-    /// scaling), when it is their range's midpoint, so `f32` keeps their
-    /// differences (pressures of 101325 ± 1 Pa, labels above 2²⁴) instead of
-    /// rounding them to steps as coarse as the values are large.
+    /// What every stored sample is relative to: none (-0.0) unless the
+    /// file's values do not all fit `f32` exactly (`f64`, `u32`, `i32`
+    /// data, or a NIfTI scaling) and lie in a range narrow beside their
+    /// magnitude, when it is the range's midpoint ([`f32_offset`]), so
+    /// `f32` keeps their differences (pressures of 101325 ± 1 Pa, labels
+    /// above 2²⁴) instead of rounding them to steps as coarse as the values
+    /// are large.
     offset: f64,
     /// Non-finite samples that were replaced on load (`--allow-nan`).
     pub replaced_nonfinite: usize,
@@ -548,7 +550,6 @@ pub fn f32_offset(values: impl Iterator<Item = f64>) -> f64 {
     if exact || lo > hi || largest > f32::MAX as f64 || hi - lo >= largest / 2.0 {
         return 0.0;
     }
-    // Halved first: the sum of two values near f64::MAX overflows.
     let mid = lo / 2.0 + hi / 2.0;
     if whole { mid.round() } else { mid }
 }
