@@ -112,14 +112,9 @@ fn what_differs(a: &Option<FrameId>, b: &Option<FrameId>) -> String {
                 [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
                 [] => unreachable!("matched above"),
             };
-            format!(
-                "{list} {}",
-                if names.len() == 1 {
-                    "differs"
-                } else {
-                    "differ"
-                }
-            )
+            // "the [render] settings" is plural on its own.
+            let plural = names.len() > 1 || list.ends_with("settings");
+            format!("{list} {}", if plural { "differ" } else { "differs" })
         }
     }
 }
@@ -353,6 +348,29 @@ mod tests {
                     .collect(),
             )],
         }
+    }
+
+    /// The refusal names the differing aspects in words, with the verb
+    /// agreeing; parts without aspects get the general words.
+    #[test]
+    fn what_differs_names_the_aspects() {
+        let id = |a: [u64; 6]| Some(FrameId::of_aspects(a));
+        let base = id([1; 6]);
+        let said = |other| what_differs(&base, &other);
+        assert_eq!(
+            said(id([1, 1, 1, 2, 1, 1])),
+            "the surface (filter, iso-value or ior) differs"
+        );
+        assert_eq!(said(id([1, 1, 1, 1, 1, 2])), "the [render] settings differ");
+        assert_eq!(
+            said(id([2, 1, 2, 1, 2, 1])),
+            "the volume's samples or spacing, the camera and the backdrop differ"
+        );
+        let old = Some(FrameId {
+            hash: 5,
+            aspects: None,
+        });
+        assert_eq!(said(old), "scene settings or volume differ");
     }
 
     #[test]
