@@ -914,10 +914,13 @@ fn first_use_messages_warnings_and_help() {
     // A command that runs no traversal says so in its own words, once, and
     // not as a render would ("the octree finds crossings cell by cell");
     // a setting it reads as a render does is noted alike.
-    let e = from_root(&format!(
-        "reference {SPHERE} --hits {} {small} --set render.step=0.5 --set camera.height=3",
-        t.path("ref.exr").display()
-    ));
+    let reference = |sets: &str| {
+        from_root(&format!(
+            "reference {SPHERE} --hits {} {small} {sets}",
+            t.path("ref.exr").display()
+        ))
+    };
+    let e = reference("--set render.step=0.5 --set camera.height=3");
     assert!(
         e.contains("warning: --set render.step ignored: the reference traces"),
         "{e}"
@@ -928,20 +931,15 @@ fn first_use_messages_warnings_and_help() {
         "{e}"
     );
     // What the analytic reference does not read at all, it says so of.
-    let e = from_root(&format!(
-        "reference {SPHERE} --hits {} {small} --set render.supersampling=grid \
-         --set render.samples=4 --set render.max_events=8",
-        t.path("ref.exr").display()
-    ));
+    let e = reference(
+        "--set render.supersampling=grid --set render.samples=4 --set render.max_events=8",
+    );
     assert!(
         e.contains("warning: --set render.supersampling, render.samples ignored: the reference traces the phantom's analytic spheres"),
         "{e}"
     );
     // So of the settings inside a table it is given.
-    let e = from_root(&format!(
-        "reference {SPHERE} --hits {} {small} --set render={{samples=4,max_events=8}}",
-        t.path("ref.exr").display()
-    ));
+    let e = reference("--set render={samples=4,max_events=8}");
     assert!(
         e.contains("warning: --set render.samples ignored: the reference traces"),
         "{e}"

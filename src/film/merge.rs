@@ -90,14 +90,15 @@ fn frame_name(frame: &Option<FrameId>) -> String {
 /// What differs between two parts' frames, in words: the aspects whose
 /// hashes differ when both parts carry them.
 fn what_differs(a: &Option<FrameId>, b: &Option<FrameId>) -> String {
+    // Each aspect in words, and whether the words are plural.
     let words = |aspect: &'static str| match aspect {
-        "volume" => "the volume's samples or spacing",
-        "image" => "the image size or background",
-        "camera" => "the camera",
-        "surface" => "the surface (filter, iso-value or ior)",
-        "backdrop" => "the backdrop",
-        "render" => "the [render] settings",
-        other => other,
+        "volume" => ("the volume's samples or spacing", false),
+        "image" => ("the image size or background", false),
+        "camera" => ("the camera", false),
+        "surface" => ("the surface (filter, iso-value or ior)", false),
+        "backdrop" => ("the backdrop", false),
+        "render" => ("the [render] settings", true),
+        other => (other, false),
     };
     let differ = match (a, b) {
         (Some(a), Some(b)) => a.differing(b),
@@ -106,14 +107,13 @@ fn what_differs(a: &Option<FrameId>, b: &Option<FrameId>) -> String {
     match differ.as_deref() {
         Some([]) | None => "scene settings or volume differ".into(),
         Some(names) => {
-            let names: Vec<&str> = names.iter().map(|&n| words(n)).collect();
+            let (names, plurals): (Vec<&str>, Vec<bool>) = names.iter().map(|&n| words(n)).unzip();
             let list = match names.as_slice() {
                 [one] => one.to_string(),
                 [rest @ .., last] => format!("{} and {last}", rest.join(", ")),
                 [] => unreachable!("matched above"),
             };
-            // "the [render] settings" is plural on its own.
-            let plural = names.len() > 1 || list.ends_with("settings");
+            let plural = names.len() > 1 || plurals[0];
             format!("{list} {}", if plural { "differ" } else { "differs" })
         }
     }
