@@ -99,6 +99,10 @@ impl HitComparison {
             "{} pixels: {} reach the backdrop in both, {} in only one, {events}\n",
             self.pixels, self.both_valid, self.validity_mismatch,
         );
+        if self.both_valid == 0 {
+            s.push_str("hit error: none measured (no pixel reaches the backdrop in both)\n");
+            return s;
+        }
         let n = crate::human::sig4;
         s.push_str(&format!(
             "hit error (backdrop units): p50 {}  p90 {}  p99 {}  max {}  mean {}\n",
@@ -109,13 +113,17 @@ impl HitComparison {
             n(self.mean)
         ));
         let r = &self.refracted;
-        s.push_str(&format!(
-            "refracted pixels ({}): p50 {}  p90 {}  p99 {} {unit}\n",
-            r.pixels,
-            n(self.squares(r.p50)),
-            n(self.squares(r.p90)),
-            n(self.squares(r.p99))
-        ));
+        if r.pixels == 0 {
+            s.push_str("refracted pixels: none (no pixel refracts in both)\n");
+        } else {
+            s.push_str(&format!(
+                "refracted pixels ({}): p50 {}  p90 {}  p99 {} {unit}\n",
+                r.pixels,
+                n(self.squares(r.p50)),
+                n(self.squares(r.p90)),
+                n(self.squares(r.p99))
+            ));
+        }
         if self.checker.is_some() {
             s.push_str(&format!(
                 "hit error ({unit}):        p50 {}  p90 {}  p99 {}  max {}\n",
@@ -314,6 +322,35 @@ mod tests {
         );
         let d = disagreements(&a, &b, 10).unwrap();
         assert_eq!(d.iter().map(|d| d.x).collect::<Vec<_>>(), vec![2, 1]);
+    }
+
+    /// Where no pixel reaches the backdrop in both, or none refracts in
+    /// both, the table says so instead of printing NaN percentiles.
+    #[test]
+    fn no_common_pixel_prints_no_nan() {
+        let a = HitImage {
+            width: 2,
+            height: 1,
+            u: vec![f32::NAN, 1.0],
+            v: vec![f32::NAN, 0.0],
+            events: vec![2.0, 0.0],
+        };
+        let mut b = a.clone();
+        b.u = vec![0.5, f32::NAN];
+        b.v = vec![0.0, f32::NAN];
+        let t = compare_hits(&a, &b, Some(8.0)).unwrap().table();
+        assert!(
+            t.contains("hit error: none measured (no pixel reaches the backdrop in both)"),
+            "{t}"
+        );
+        assert!(!t.contains("NaN"), "{t}");
+        // Both reach it, neither refracts.
+        let t = compare_hits(&a, &a, None).unwrap().table();
+        assert!(
+            t.contains("refracted pixels: none (no pixel refracts in both)"),
+            "{t}"
+        );
+        assert!(!t.contains("NaN"), "{t}");
     }
 
     #[test]

@@ -106,7 +106,19 @@ fn smoke_suite_writes_every_output() {
         if cfg!(target_os = "linux") {
             assert!(number(c, "peak_rss_mib") > 0.0, "{name}");
         }
+        // Enough to render the row again: every [render] setting, the
+        // coefficient storage, the instruction set, the frame's identity.
+        assert!(number(c, "render.max_events") >= 1.0, "{name}");
+        assert!(c["render"]["prss_samples"].is_u64(), "{name}");
+        assert_eq!(c["settings"]["coefficients"], "f64", "{name}");
+        assert!(c["isa"].as_str().is_some_and(|s| !s.is_empty()), "{name}");
+        assert!(
+            c["frame_id"].as_str().is_some_and(|s| s.len() >= 16),
+            "{name}"
+        );
     }
+    // Rows of other settings are other frames.
+    assert_ne!(configs[0]["frame_id"], configs[1]["frame_id"]);
     // Anti-aliasing rows carry image quality against the 16×16 render;
     // the shared octree row got it for the anti-aliasing table.
     let prss = configs

@@ -67,8 +67,15 @@ pub enum BenchError {
         #[source]
         source: std::io::Error,
     },
-    #[error("{}: not a directory", path.display())]
+    #[error("output directory {}: not a directory", path.display())]
     NotADirectory { path: PathBuf },
+    #[error("output directory {}: {what} ({source})", path.display())]
+    OutDir {
+        path: PathBuf,
+        what: &'static str,
+        #[source]
+        source: std::io::Error,
+    },
     #[error("{}: scene file not found (run from the repository root or pass --scenes DIR)", path.display())]
     MissingScene { path: PathBuf },
     #[error(transparent)]
@@ -225,9 +232,16 @@ fn prepare_out_dir(dir: &Path) -> Result<(), BenchError> {
             path: dir.to_path_buf(),
         });
     }
-    std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+    let out_dir = |what: &'static str| {
+        move |source| BenchError::OutDir {
+            path: dir.to_path_buf(),
+            what,
+            source,
+        }
+    };
+    std::fs::create_dir_all(dir).map_err(out_dir("cannot create it"))?;
     let probe = dir.join(format!(".snell-bench-probe-{}", std::process::id()));
-    std::fs::write(&probe, b"").map_err(io_err(dir))?;
+    std::fs::write(&probe, b"").map_err(out_dir("cannot write files in it"))?;
     let _ = std::fs::remove_file(&probe);
     Ok(())
 }

@@ -21,7 +21,7 @@ pub struct PrefilterPasses {
 impl PrefilterPasses {
     /// The padded `f64` grid of `vol`'s samples (before any filtering).
     pub fn of(vol: &Volume) -> PrefilterPasses {
-        let pristine = Coeffs::<f64>::from_volume(vol);
+        let pristine = Coeffs::<f64>::from_volume(vol, 0.0);
         let work = pristine.data().to_vec();
         PrefilterPasses { pristine, work }
     }

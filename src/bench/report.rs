@@ -20,6 +20,25 @@ pub fn fmt_ms(v: f64) -> String {
 
 /// Three significant digits; scientific below 1e-3 (hit errors span decades).
 pub fn fmt_sig(v: f64) -> String {
+    fmt_sig_digits(v, 3)
+}
+
+/// `a` and `b` as [`fmt_sig`] writes them, or with as many more digits (up
+/// to 9) as tell them apart where they differ: a row that says one error is
+/// lower never shows the two as equal.
+pub fn fmt_sig_pair(a: f64, b: f64) -> (String, String) {
+    let mut digits = 3;
+    loop {
+        let (x, y) = (fmt_sig_digits(a, digits), fmt_sig_digits(b, digits));
+        if x != y || a == b || a.is_nan() || b.is_nan() || digits == 9 {
+            return (x, y);
+        }
+        digits += 1;
+    }
+}
+
+/// `digits` significant digits; scientific below 1e-3 and from 1e5.
+fn fmt_sig_digits(v: f64, digits: usize) -> String {
     if v.is_nan() {
         return "–".into();
     }
@@ -28,9 +47,10 @@ pub fn fmt_sig(v: f64) -> String {
     }
     let a = v.abs();
     if !(1e-3..1e5).contains(&a) {
-        return format!("{v:.2e}");
+        let prec = digits - 1;
+        return format!("{v:.prec$e}");
     }
-    let decimals = (2 - a.log10().floor() as i32).max(0) as usize;
+    let decimals = (digits as i32 - 1 - a.log10().floor() as i32).max(0) as usize;
     format!("{v:.decimals$}")
 }
 
@@ -478,13 +498,15 @@ fn opt(v: Option<f64>) -> String {
     v.map_or(String::new(), num)
 }
 
-pub const CSV_COLUMNS: [&str; 43] = [
+pub const CSV_COLUMNS: [&str; 49] = [
     "id",
     "scene",
     "name",
     "tables",
     "overrides",
     "filter",
+    "iso",
+    "coefficients",
     "traversal",
     "classify",
     "supersampling",
@@ -493,6 +515,7 @@ pub const CSV_COLUMNS: [&str; 43] = [
     "width",
     "height",
     "threads",
+    "isa",
     "runs",
     "wall_median_ms",
     "wall_min_ms",
@@ -522,6 +545,9 @@ pub const CSV_COLUMNS: [&str; 43] = [
     "events_equal",
     "psnr_db",
     "ssim",
+    "frame_id",
+    "cpu",
+    "commit",
 ];
 
 /// `results.csv`: one row per configuration.
@@ -537,6 +563,8 @@ pub fn csv(r: &Report) -> String {
             c.tables.join(";"),
             c.overrides.join(";"),
             st.filter.clone(),
+            num(st.iso),
+            st.coefficients.clone(),
             st.traversal.clone(),
             st.classify.clone().unwrap_or_default(),
             st.supersampling.clone(),
@@ -545,6 +573,7 @@ pub fn csv(r: &Report) -> String {
             st.width.to_string(),
             st.height.to_string(),
             c.threads.to_string(),
+            c.isa.clone(),
             c.runs.to_string(),
             num(c.wall_ms.median),
             num(c.wall_ms.min),
@@ -570,6 +599,11 @@ pub fn csv(r: &Report) -> String {
             num(c.error.events_equal),
             opt(c.quality.map(|q| q.psnr)),
             opt(c.quality.map(|q| q.ssim)),
+            c.frame_id.clone(),
+            // The run's, on every row: a CSV read alone still says where
+            // and from what its times came.
+            r.machine.cpu_model.clone().unwrap_or_default(),
+            r.machine.git.clone().unwrap_or_default(),
         ]);
         debug_assert_eq!(f.len(), CSV_COLUMNS.len());
         s.push_str(&f.iter().map(|x| csv_field(x)).collect::<Vec<_>>().join(","));
@@ -581,6 +615,22 @@ pub fn csv(r: &Report) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn sig_pairs_tell_different_values_apart() {
+        assert_eq!(fmt_sig(0.21934), "0.219");
+        assert_eq!(
+            fmt_sig_pair(0.21934, 0.21912),
+            ("0.2193".into(), "0.2191".into())
+        );
+        assert_eq!(fmt_sig_pair(0.193, 0.219), ("0.193".into(), "0.219".into()));
+        assert_eq!(fmt_sig_pair(0.5, 0.5), ("0.500".into(), "0.500".into()));
+        assert_eq!(
+            fmt_sig_pair(2.0e-4, 2.0001e-4),
+            ("2.0000e-4".into(), "2.0001e-4".into())
+        );
+        assert_eq!(fmt_sig_pair(f64::NAN, 1.0).0, "–");
+    }
 
     #[test]
     fn number_formats() {
@@ -625,9 +675,12 @@ mod tests {
                 .unwrap()],
             "12"
         );
+        let column = |name: &str| CSV_COLUMNS.iter().position(|c| *c == name).unwrap();
         // No image quality: empty fields, not "NaN" or "null".
-        assert_eq!(row[CSV_COLUMNS.len() - 1], "");
-        assert_eq!(split_csv(lines[3])[CSV_COLUMNS.len() - 2], "30.5");
+        assert_eq!(row[column("ssim")], "");
+        assert_eq!(split_csv(lines[3])[column("psnr_db")], "30.5");
+        assert_eq!(row[column("cpu")], "Test CPU, 2 cores");
+        assert_eq!(row[column("iso")], "127.5");
         assert_eq!(csv_field("a,b"), "\"a,b\"");
         assert_eq!(csv_field("say \"hi\""), "\"say \"\"hi\"\"\"");
         assert_eq!(csv_field("plain"), "plain");

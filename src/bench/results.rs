@@ -107,6 +107,16 @@ pub struct ConfigResult {
     /// Ids of the tables that list it.
     pub tables: Vec<String>,
     pub settings: Settings,
+    /// Every `[render]` setting as the scene resolved it (the PRSS and
+    /// footprint details, max_events, tile, the switches `Settings` leaves
+    /// out), so a row can be rendered again exactly.
+    pub render: serde_json::Value,
+    /// The instruction set the lanes ran under (`avx512`, `avx2`, `portable`).
+    pub isa: String,
+    /// The frame's identity (`Scene::frame_fingerprint`: volume contents,
+    /// image, camera, surface, backdrop and render settings), as the hit
+    /// EXRs of `render` carry it.
+    pub frame_id: String,
     pub threads: usize,
     /// Timed runs (after one warm-up).
     pub runs: usize,
@@ -134,6 +144,8 @@ pub struct ConfigResult {
 #[derive(Clone, Debug, Serialize)]
 pub struct Settings {
     pub filter: String,
+    pub iso: f64,
+    pub coefficients: String,
     pub traversal: String,
     pub classify: Option<String>,
     pub supersampling: String,
@@ -332,6 +344,8 @@ pub(crate) fn sample_report() -> Report {
         tables: vec!["t".into()],
         settings: Settings {
             filter: "bspline3".into(),
+            iso: 127.5,
+            coefficients: "f64".into(),
             traversal: "octree".into(),
             classify: Some("bezier".into()),
             supersampling: ss.into(),
@@ -342,6 +356,9 @@ pub(crate) fn sample_report() -> Report {
             width: 64,
             height: 64,
         },
+        render: serde_json::Value::Null,
+        isa: "avx2".into(),
+        frame_id: "0123456789abcdef".into(),
         threads: 2,
         runs: 3,
         wall_ms: TimeStats::of(&[median * 1.1, median, median * 0.9])

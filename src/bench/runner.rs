@@ -516,6 +516,7 @@ not per configuration"
             .map(|_| render::render(&scene, &prep, None))
             .collect();
         let peak = machine::peak_rss_mib();
+        let frame_id = scene.frame_fingerprint(prep.volume_hash()).to_string();
         drop(prep);
 
         let times: Vec<f64> = frames
@@ -567,6 +568,8 @@ not per configuration"
             tables: Vec::new(),
             settings: Settings {
                 filter: scene.surface.filter.to_string(),
+                iso: scene.surface.iso,
+                coefficients: rs.coefficients.name().to_string(),
                 traversal: setting_name(&rs.traversal),
                 classify: rs.classify.map(|m| m.name()),
                 supersampling: setting_name(&rs.supersampling),
@@ -577,6 +580,9 @@ not per configuration"
                 width: scene.width,
                 height: scene.height,
             },
+            render: serde_json::to_value(rs).unwrap_or_default(),
+            isa: crate::simd::Isa::current().name().to_string(),
+            frame_id,
             threads: stats.threads,
             runs,
             rays: stats.counters.rays,

@@ -227,8 +227,12 @@ pub fn run_targets(
     rows.extend(pool.install(|| speedup_rows(opts, &mut cache, observer))?);
     drop(cache);
     observer.start("prefilter passes");
-    rows.push(pool.install(|| prefilter_row(opts))?);
-    observer.tick();
+    let prefilter = pool.install(|| prefilter_row(opts))?;
+    observer.finish(&format!(
+        "prefilter passes: slowest {:.0} Mvoxels/s (median over rounds)",
+        prefilter.value
+    ));
+    rows.push(prefilter);
     let mut skipped = Vec::new();
     let mut written = Vec::new();
     if opts.peer {
@@ -362,8 +366,13 @@ fn frame_rows(
                 "round {round}/{}: {file} {traversal}, {} frames",
                 opts.rounds, opts.frames
             ));
-            r.push(m.median_of(opts.frames).0);
-            observer.tick();
+            let ms = m.median_of(opts.frames).0;
+            observer.finish(&format!(
+                "round {round}/{}: {file} {traversal}: median frame {} ms",
+                opts.rounds,
+                fmt_ms(ms)
+            ));
+            r.push(ms);
         }
     }
     Ok(FRAMES
@@ -447,7 +456,11 @@ fn speedup_rows(
         for ((file, (s, os)), g) in SPEEDUPS.iter().zip(&measured).zip(&mut got) {
             observer.start(&format!("round {round}/{}: {file} step 0.1", opts.rounds));
             let (step_ms, step_stats) = s.frame();
-            observer.tick();
+            observer.finish(&format!(
+                "round {round}/{}: {file} step 0.1: frame {} ms",
+                opts.rounds,
+                fmt_ms(step_ms)
+            ));
             for ((o, m), gm) in os.iter().zip(SPEEDUP_METHODS).zip(g.iter_mut()) {
                 observer.start(&format!(
                     "round {round}/{}: {file} octree+{}, {} frames",
@@ -456,7 +469,13 @@ fn speedup_rows(
                     opts.frames
                 ));
                 let (oct_ms, oct_stats) = o.median_of(opts.frames);
-                observer.tick();
+                observer.finish(&format!(
+                    "round {round}/{}: {file} octree+{}: median frame {} ms, {:.1}× step 0.1",
+                    opts.rounds,
+                    m.name(),
+                    fmt_ms(oct_ms),
+                    step_ms / oct_ms
+                ));
                 gm.push((step_ms, oct_ms, events(&step_stats), events(&oct_stats)));
             }
         }
@@ -629,13 +648,14 @@ fn peer_row(opts: &TargetOptions, observer: &mut dyn Observer) -> Result<TargetR
         .filter(|r| r.lower_error)
         .max_by(|a, b| a.frame.total_cmp(&b.frame));
     let (value, configuration) = match best {
-        Some(b) => (
-            b.frame,
+        Some(b) => (b.frame, {
+            let (s50, p50) = super::report::fmt_sig_pair(b.snell_p50, b.povray_p50);
+            let (s90, p90) = super::report::fmt_sig_pair(b.snell_p90, b.povray_p90);
             format!(
-                "{} against POV-Ray {}, per frame, preparation included; p50 error {:.3} against {:.3} squares",
-                b.snell, b.povray, b.snell_p50, b.povray_p50
-            ),
-        ),
+                "{} against POV-Ray {}, per frame, preparation included; error p50 {s50} against {p50}, p90 {s90} against {p90} squares",
+                b.snell, b.povray
+            )
+        }),
         None => (
             f64::NAN,
             "no snell row more accurate than POV-Ray".to_string(),

@@ -103,15 +103,14 @@ fn run_suite(a: &Args, suite: &Suite) -> anyhow::Result<()> {
         update: a.update.clone(),
         command: command_line(),
     };
-    if !cfg!(debug_assertions) {
-        eprintln!(
+    let mut bar = Bar::new(if !cfg!(debug_assertions) {
+        format!(
             "snell bench --suite {}: {} Budget: {}.",
             suite.name, suite.description, suite.budget
-        );
+        )
     } else {
-        eprintln!("warning: debug build: the times mean nothing, use --release");
-    }
-    let mut bar = Bar::new();
+        "warning: debug build: the times mean nothing, use --release".into()
+    });
     let outcome = bench::bench(suite, &opts, &mut bar)?;
     bar.done();
     // The progress counted classification rows as steps too.
@@ -154,16 +153,16 @@ fn run_peer(a: &Args, name: &str) -> anyhow::Result<()> {
     if opts.size == 0 {
         anyhow::bail!("--peer-size must be at least 1");
     }
-    eprintln!(
+    let mut banner = format!(
         "snell bench --peer {name}: snell and {name} on the glass sphere at {s}x{s}, {} threads each, one warm-up and {} timed runs per row, round-robin (under a minute at 512x512 on 2 cores).",
         opts.threads,
         opts.repeats,
         s = opts.size
     );
     if cfg!(debug_assertions) {
-        eprintln!("warning: debug build: snell's times mean nothing, use --release");
+        banner.push_str("\nwarning: debug build: snell's times mean nothing, use --release");
     }
-    let mut bar = Bar::new();
+    let mut bar = Bar::new(banner);
     let outcome = match peer::peer_bench(name, &opts, &mut bar) {
         Ok(o) => o,
         Err(bench::BenchError::PeerMissing(msg)) => {
@@ -207,14 +206,14 @@ fn run_targets(a: &Args) -> anyhow::Result<()> {
         update: a.update.clone(),
         command: command_line(),
     };
-    eprintln!(
+    let mut banner = format!(
         "snell bench --targets: {} rounds over every target's configurations, {} threads, {}x{} (about 3 minutes on 2 cores with POV-Ray).",
         opts.rounds, opts.threads, opts.size, opts.size
     );
     if cfg!(debug_assertions) {
-        eprintln!("warning: debug build: the times mean nothing, use --release");
+        banner.push_str("\nwarning: debug build: the times mean nothing, use --release");
     }
-    let mut bar = Bar::new();
+    let mut bar = Bar::new(banner);
     let outcome = targets::run_targets(&opts, &mut bar)?;
     bar.done();
     print!("{}", targets::section(&outcome.report));
@@ -237,16 +236,21 @@ fn command_line() -> String {
         .join(" ")
 }
 
-/// Progress on stderr: a bar with an ETA (configurations done of all) and
-/// one line per finished configuration, which stays in the scroll-back (and
-/// is all that shows when stderr is not a terminal).
+/// Progress on stderr: a banner saying what the run does, a bar with an
+/// ETA (configurations done of all) and one line per finished
+/// configuration, which stays in the scroll-back (and is all that shows
+/// when stderr is not a terminal).
 struct Bar {
     bar: Option<indicatif::ProgressBar>,
+    /// Printed when the run begins: after its inputs and outputs have been
+    /// checked, so a bad flag's error is not preceded by a promise of
+    /// minutes of work.
+    banner: String,
 }
 
 impl Bar {
-    fn new() -> Bar {
-        Bar { bar: None }
+    fn new(banner: String) -> Bar {
+        Bar { bar: None, banner }
     }
 
     fn done(&mut self) {
@@ -258,6 +262,7 @@ impl Bar {
 
 impl Observer for Bar {
     fn begin(&mut self, total: usize) {
+        eprintln!("{}", self.banner);
         let b = indicatif::ProgressBar::new(total as u64);
         b.set_style(super::progress::style(
             "[{bar:30}] {pos}/{len} runs, {elapsed} elapsed, ETA {eta}  {wide_msg}",

@@ -25,6 +25,10 @@ pub struct Args {
     pub set: Vec<String>,
     #[command(flatten)]
     pub limit: MemoryLimit,
+    /// Print no notes (warnings still): the reference prints no table or
+    /// progress, so scripts that pass -q to every command may pass it here.
+    #[arg(short, long)]
+    pub quiet: bool,
 }
 
 /// The analytic spheres take one ray per pixel centre: the filter and the
@@ -59,6 +63,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     if let snell::scene::VolumeSource::Phantom(snell::phantom::PhantomSpec::Sphere(spec)) =
         &scene.volume
         && spec.noise > 0.0
+        && !a.quiet
     {
         // The reference is the truth the noise hides, what a filter's
         // render of the noisy volume is measured against.

@@ -38,6 +38,11 @@ pub trait Coefficient:
     crate::simd::Row4 + Default + Send + Sync + PartialEq + std::fmt::Debug + 'static
 {
     const NAME: &'static str;
+    /// Whether it holds every `f64` exactly (`f64` itself). Narrower
+    /// storage keeps a volume's samples relative to its offset
+    /// ([`crate::volume::Volume::offset`]): rounding then costs digits of
+    /// the data's own variation, not of a constant added to it.
+    const EXACT: bool = false;
     fn to_f64(self) -> f64;
     fn from_f64(v: f64) -> Self;
     /// The slice itself when the storage is already `f64` (vector kernels
@@ -59,6 +64,7 @@ pub trait Coefficient:
 
 impl Coefficient for f64 {
     const NAME: &'static str = "f64";
+    const EXACT: bool = true;
     #[inline(always)]
     fn to_f64(self) -> f64 {
         self
@@ -125,12 +131,13 @@ pub struct Coeffs<T: Coefficient = f64> {
 
 impl<T: Coefficient> Coeffs<T> {
     /// The samples themselves, padded (coefficients of non-prefiltered kernels,
-    /// and the input of in-place prefiltering), their offset added back in
-    /// `f64` ([`Volume::offset`]).
-    pub fn from_volume(vol: &Volume) -> Coeffs<T> {
-        let offset = vol.offset();
+    /// and the input of in-place prefiltering), less `frame`: their offset
+    /// ([`Volume::offset`]) less `frame` added back in `f64`. A frame of the
+    /// volume's offset keeps the samples as stored ([`Coefficient::EXACT`]).
+    pub fn from_volume(vol: &Volume, frame: f64) -> Coeffs<T> {
+        let shift = vol.offset() - frame;
         Coeffs::from_interior(vol.dims(), vol.samples(), |v: &f32| {
-            T::from_f64(offset + *v as f64)
+            T::from_f64(shift + *v as f64)
         })
     }
 
@@ -383,7 +390,7 @@ mod tests {
         let dims = [3usize, 2, 1];
         let s: Vec<f32> = (0..6).map(|v| v as f32).collect();
         let vol = Volume::new(dims, [1.0; 3], SampleType::F32, s).unwrap();
-        let c: Coeffs<f32> = Coeffs::from_volume(&vol);
+        let c: Coeffs<f32> = Coeffs::from_volume(&vol, 0.0);
         let a = APRON as isize;
         for k in -a..1 + a {
             for j in -a..2 + a {

@@ -61,8 +61,11 @@ macro_rules! with_support {
 /// part. The renderer and the classifications compare evaluations only
 /// with [`Field::separating_iso`], which maps the scene's iso-value into
 /// the same frame, and the surface's normal is the gradient's direction,
-/// so a shifted and scaled field renders the same surface. `f16` storage
-/// is centred on the scene's iso-value this way: near the surface the
+/// so a shifted and scaled field renders the same surface. `f32` and `f16`
+/// storage of a volume held relative to an offset ([`Volume::offset`]) keep
+/// its samples relative to it, so that they round the data's variation and
+/// not the offset's digits; `f16` storage is centred on the scene's
+/// iso-value this way: near the surface the
 /// stored values are then small, where `f16`'s absolute precision is
 /// fine, instead of near the iso-value, where its 11 bits round by the
 /// data's scale over 2048; and scaled, so that a field of any magnitude
@@ -89,9 +92,13 @@ pub struct Field<T: Coefficient = f64> {
 impl<T: Coefficient> Field<T> {
     /// Prefilters `vol` for `kind` in place in the padded grid of `T`
     /// (parallel over lines, each line in `f64`: with `f32` storage that
-    /// rounds once per axis pass) and keeps the coefficients.
+    /// rounds once per axis pass) and keeps the coefficients: in `f64` as
+    /// the field's values, in narrower storage relative to the volume's
+    /// offset, the field's [`Field::offset`] (the prefilter maps a
+    /// constant to itself, so the offset passes through it unchanged).
     pub fn new_in(vol: &Volume, kind: FilterKind) -> Field<T> {
-        let mut coeffs = Coeffs::<T>::from_volume(vol);
+        let frame = if T::EXACT { 0.0 } else { vol.offset() };
+        let mut coeffs = Coeffs::<T>::from_volume(vol, frame);
         let prefilter = kind.prefilter();
         if !prefilter.is_identity() {
             let dims = coeffs.dims();
@@ -101,7 +108,7 @@ impl<T: Coefficient> Field<T> {
             coeffs.fill_apron();
         }
         debug_assert!(APRON >= kind.kernel().support() / 2);
-        Field::from_coeffs(kind, coeffs)
+        Field::from_coeffs(kind, coeffs).with_frame(frame, 1.0)
     }
 }
 
@@ -114,20 +121,20 @@ impl Field<f64> {
 }
 
 impl Field<f32> {
-    /// Like [`Field::new`] but stores `f32` coefficients (half the memory); the
+    /// Like [`Field::new`] but stores `f32` coefficients (half the memory),
+    /// relative to the volume's offset as [`Field::new_in`] stores them; the
     /// prefilter runs in `f64` on a full copy and rounds once (the reference
     /// the tests hold [`Field::new_in`] to).
     pub fn new_f32(vol: &Volume, kind: FilterKind) -> Field<f32> {
         let prefilter = kind.prefilter();
         let coeffs = if prefilter.is_identity() {
-            Coeffs::from_volume(vol)
+            Coeffs::from_volume(vol, vol.offset())
         } else {
-            let offset = vol.offset();
-            let mut work: Vec<f64> = vol.samples().iter().map(|&v| offset + v as f64).collect();
+            let mut work: Vec<f64> = vol.samples().iter().map(|&v| v as f64).collect();
             prefilter.apply_3d(&mut work, vol.dims());
             Coeffs::from_interior(vol.dims(), &work, |v: &f64| *v as f32)
         };
-        Field::from_coeffs(kind, coeffs)
+        Field::from_coeffs(kind, coeffs).with_frame(vol.offset(), 1.0)
     }
 }
 
@@ -761,6 +768,60 @@ mod tests {
         let big = Volume::new([2; 3], [1.0; 3], SampleType::F32, vec![1e30; 8]).unwrap();
         let f = Field::new(&big, FilterKind::Linear);
         assert!(near(eps(&f, 1.0), 1e-11 * 1e30f32 as f64));
+    }
+
+    /// A volume held relative to an offset keeps it in narrow storage: the
+    /// coefficients round the data's own variation, as those of the same
+    /// values unshifted do, not the constant's digits (f32's step at 101325
+    /// is 0.0078).
+    #[test]
+    fn narrow_storage_keeps_the_volume_offset() {
+        let dims = [12, 11, 10];
+        let base = crate::volume::scrambled_u8(dims, 5);
+        let values = |shift: f64| -> Vec<f64> {
+            base.samples()
+                .iter()
+                .map(|&v| shift + v as f64 / 7.0)
+                .collect()
+        };
+        let vol =
+            |shift| Volume::from_f64(dims, [1.0; 3], SampleType::F64, &values(shift)).unwrap();
+        let (plain, shifted) = (vol(0.0), vol(101325.0));
+        assert!(shifted.offset() != 0.0, "f32 rounds these values");
+        let points: Vec<DVec3> = (0..200)
+            .map(|i| {
+                let t = i as f64;
+                DVec3::new(
+                    (t * 0.377).rem_euclid(11.0),
+                    (t * 0.613).rem_euclid(10.0),
+                    (t * 0.291).rem_euclid(9.0),
+                )
+            })
+            .collect();
+        // The worst error of `vol`'s narrow fields at the points, against
+        // its f64 field.
+        let worst = |vol: &Volume, kind: FilterKind| -> [f64; 2] {
+            let exact = Field::new(vol, kind);
+            let narrow = [Field::<f32>::new_in(vol, kind), Field::new_f32(vol, kind)];
+            narrow.map(|f| {
+                assert_eq!(f.offset(), vol.offset());
+                points
+                    .iter()
+                    .map(|&p| (f.offset() + f.value(p) - exact.value(p)).abs())
+                    .fold(0.0f64, f64::max)
+            })
+        };
+        for name in ["linear", "bspline3", "bspline7"] {
+            let kind = FilterKind::parse(name, 0.0).unwrap();
+            let (a, b) = (worst(&plain, kind), worst(&shifted, kind));
+            for k in 0..2 {
+                // (beyond f64's own rounding of sums near 101325)
+                assert!(b[k] <= 2.0 * a[k] + 1e-9, "{name} {k}: {b:?} against {a:?}");
+            }
+            // The iso-value maps into the coefficients' frame.
+            let f = Field::new_f32(&shifted, kind);
+            assert!((f.separating_iso(101330.0) - (101330.0 - shifted.offset())).abs() < 1e-6);
+        }
     }
 
     #[test]

@@ -46,17 +46,19 @@ fn write_u64s(w: &mut dyn Write, v: &[u64]) -> std::io::Result<()> {
 /// unless it is `f64` (so `f64` cache files keep their names); for `f16`
 /// also the iso-value its coefficients are centred on, and `scaled`: they
 /// are multiplied by a power of two the volume and that centre give
-/// (`f16_scale`), which older files, named without the word, were not.
+/// (`f16_scale`), which older files, named without the word, were not;
+/// for `f32`, `relative`: they are relative to the volume's offset, which
+/// older files of a volume with an offset were not.
 pub(super) fn field_name(filter: FilterKind, storage: Storage, centre: f64) -> String {
     match storage {
         Storage::F64 => filter.cache_key(),
+        Storage::F32 => format!("{}-{}-relative", filter.cache_key(), storage.name()),
         Storage::F16 => format!(
             "{}-{}-scaled-{:016x}",
             filter.cache_key(),
             storage.name(),
             centre.to_bits()
         ),
-        s => format!("{}-{}", filter.cache_key(), s.name()),
     }
 }
 

@@ -315,14 +315,16 @@ pub(super) fn f16_scale(vol: &Volume, centre: f64) -> f64 {
     2f64.powi(exponent.clamp(-1000, 1000))
 }
 
-/// `f` less `centre`, times `scale` ([`f16_scale`]), rounded once to `f16`
-/// (so the values near the surface at iso `centre` are small, where `f16`
-/// is precise), or an error naming the largest when some still lie beyond
-/// `f16`'s range (they would become infinite).
+/// The field `f` less `centre`, times `scale` ([`f16_scale`]), rounded once
+/// to `f16` (so the values near the surface at iso `centre` are small, where
+/// `f16` is precise), or an error naming the largest when some still lie
+/// beyond `f16`'s range (they would become infinite).
 fn f16_field(f: Field<f32>, centre: f64, scale: f64) -> Result<Field<half::f16>, SceneError> {
+    // `f`'s coefficients are relative to its offset (the volume's).
+    let shift = centre - f.offset();
     // NaN-propagating: a NaN coefficient or centre is refused too.
     let max = f.coeffs().data().iter().fold(0.0f64, |m, c| {
-        let d = (c.to_f64() - centre).abs();
+        let d = (c.to_f64() - shift).abs();
         if d > m || d.is_nan() { d } else { m }
     });
     if max.is_nan() || max * scale > half::f16::MAX.to_f64() {
@@ -336,7 +338,7 @@ fn f16_field(f: Field<f32>, centre: f64, scale: f64) -> Result<Field<half::f16>,
             ),
         });
     }
-    let coeffs = f.coeffs().convert_shifted(centre, scale);
+    let coeffs = f.coeffs().convert_shifted(shift, scale);
     Ok(Field::from_coeffs(f.kind(), coeffs).with_frame(centre, scale))
 }
 
@@ -716,9 +718,9 @@ impl Cache {
             Storage::F64 => {
                 read_field(path, filter, vol.dims()).map(|f| AnyField::F64(Arc::new(f)))
             }
-            Storage::F32 => {
-                read_field(path, filter, vol.dims()).map(|f| AnyField::F32(Arc::new(f)))
-            }
+            // Stored relative to the volume's offset (`Field::new_in`).
+            Storage::F32 => read_field(path, filter, vol.dims())
+                .map(|f: Field<f32>| AnyField::F32(Arc::new(f.with_frame(vol.offset(), 1.0)))),
             // Stored less `centre` (the file's name says which), times the
             // scale the volume and the centre give.
             Storage::F16 => read_field(path, filter, vol.dims()).map(|f: Field<half::f16>| {
@@ -1074,7 +1076,7 @@ mod tests {
             .unwrap()
             .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
             .collect();
-        let f32_file = names.iter().find(|n| n.ends_with("-f32.coef"));
+        let f32_file = names.iter().find(|n| n.ends_with("-f32-relative.coef"));
         assert!(f32_file.is_some(), "{names:?}");
         assert_eq!(names.iter().filter(|n| n.ends_with(".coef")).count(), 2);
         let mut reader = Cache::with_dir(&dir).unwrap();

@@ -1,7 +1,7 @@
 //! The `bench:peer` section of BENCHMARKS.md: provenance, the table of
 //! rows, the speed ratios, the interpolants' check and the notes.
 
-use super::super::report::{fmt_duration, fmt_ms, fmt_sig};
+use super::super::report::{fmt_duration, fmt_ms, fmt_sig, fmt_sig_pair};
 use super::{GOAL_SPEEDUP, POV_ACCURACY, PeerReport, PeerRow};
 
 pub(super) fn row_line(r: &PeerRow) -> String {
@@ -141,17 +141,15 @@ err p50 snell / POV-Ray | err p90 snell / POV-Ray | lower error |\n\
 | --- | ---: | ---: | ---: | ---: | ---: | --- |\n"
         );
         for x in &r.ratios {
+            let (s50, p50) = fmt_sig_pair(x.snell_p50, x.povray_p50);
+            let (s90, p90) = fmt_sig_pair(x.snell_p90, x.povray_p90);
             let _ = writeln!(
                 s,
-                "| {} | {} | {} | {} | {} / {} | {} / {} | {} |",
+                "| {} | {} | {} | {} | {s50} / {p50} | {s90} / {p90} | {} |",
                 x.snell,
                 ratio(x.frame),
                 ratio(x.render),
                 x.process.map_or("–".into(), ratio),
-                fmt_sig(x.snell_p50),
-                fmt_sig(x.povray_p50),
-                fmt_sig(x.snell_p90),
-                fmt_sig(x.povray_p90),
                 if x.lower_error { "yes" } else { "no" }
             );
         }
