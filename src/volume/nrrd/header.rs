@@ -28,6 +28,9 @@ pub(super) struct Fields {
     /// components a space direction must have.
     pub(super) space_dimension: Option<usize>,
     pub(super) space: Option<usize>,
+    /// The named `space` is left-handed (`LAS`, `3D-left-handed`): its
+    /// directions' determinant has the opposite sign for the same shape.
+    pub(super) space_left_handed: bool,
 }
 
 /// Reads the header up to the blank line that ends it (or the end of the file,
@@ -274,6 +277,10 @@ pub(super) fn parse_line(
         "space" => {
             let d = space_dimension(value)
                 .ok_or_else(|| bad(format!("unknown space '{}'", excerpt(value))))?;
+            let name = value.trim().to_ascii_lowercase();
+            fields.space_left_handed = name.starts_with("left-anterior-superior")
+                || name.starts_with("las")
+                || name.starts_with("3d-left-handed");
             set_once(&mut fields.space, d, &bad)
         }
         // The rest of teem's fields do not change how the samples are read.

@@ -104,6 +104,12 @@ impl Layout {
                 )
             })
             .into_iter()
+            .chain(mirrored(f, &axes).then(|| {
+                format!(
+                    "{}: the space directions reverse the grid's handedness (a negative determinant: an odd number of axes stored in reverse); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
+                    path.display()
+                )
+            }))
             .collect();
 
         let byte_skip = match f.byte_skip.unwrap_or(0) {
@@ -153,6 +159,32 @@ fn shear(f: &Fields, axes: &[usize]) -> Option<(usize, usize, f64)> {
         }
     }
     None
+}
+
+/// Whether the three grid axes' space directions (`axes`) form a frame of
+/// the other handedness than the space's (a negative determinant in a
+/// right-handed space such as LPS or RAS): rendered in index order, as
+/// snell renders every volume, such a scan is its own mirror image. A
+/// rotation alone (an even number of reversed axes among them) keeps the
+/// shape and passes.
+fn mirrored(f: &Fields, axes: &[usize]) -> bool {
+    let Some(dirs) = f.space_directions.as_ref() else {
+        return false;
+    };
+    let dir = |a: usize| -> Option<[f64; 3]> {
+        let d = dirs.get(a)?.as_deref()?;
+        (d.len() == 3 && d.iter().all(|c| c.is_finite())).then(|| [d[0], d[1], d[2]])
+    };
+    let (Some(u), Some(v), Some(w)) = (
+        axes.first().and_then(|&a| dir(a)),
+        axes.get(1).and_then(|&a| dir(a)),
+        axes.get(2).and_then(|&a| dir(a)),
+    ) else {
+        return false;
+    };
+    let det = u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
+        + u[2] * (v[0] * w[1] - v[1] * w[0]);
+    (det < 0.0) != f.space_left_handed
 }
 
 pub(super) fn join<T: std::fmt::Display>(values: &[T]) -> String {

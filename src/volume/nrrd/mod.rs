@@ -548,12 +548,37 @@ mod tests {
         ))
         .unwrap();
         assert_eq!(l.spacing, [0.5, 2.0, 1.5]);
-        // Rotated axes: the spacing is each vector's length.
+        // One reversed axis: rendered in index order, a mirror image.
+        assert_eq!(l.warnings.len(), 1, "{:?}", l.warnings);
+        assert!(l.warnings[0].contains("mirror image"), "{:?}", l.warnings);
+        // Rotated axes: the spacing is each vector's length; a rotation
+        // (two axes reversed among them) keeps the shape, unwarned.
+        let l = layout(&format!(
+            "{base}dimension: 3\nsizes: 2 2 2\nspace directions: (3,4,0) (0,0,2) (4,-3,0)\n\n"
+        ))
+        .unwrap();
+        assert_eq!(l.spacing, [5.0, 2.0, 5.0]);
+        assert!(l.warnings.is_empty(), "{:?}", l.warnings);
+        let l = layout(&format!(
+            "{base}dimension: 3\nsizes: 2 2 2\nspace directions: (-1,0,0) (0,-1,0) (0,0,1)\n\n"
+        ))
+        .unwrap();
+        assert!(l.warnings.is_empty(), "{:?}", l.warnings);
+        // The same rotated axes with the third reversed: mirrored.
         let l = layout(&format!(
             "{base}dimension: 3\nsizes: 2 2 2\nspace directions: (3,4,0) (0,0,2) (-4,3,0)\n\n"
         ))
         .unwrap();
-        assert_eq!(l.spacing, [5.0, 2.0, 5.0]);
+        assert!(
+            l.warnings.iter().any(|w| w.contains("mirror image")),
+            "{:?}",
+            l.warnings
+        );
+        // In a left-handed space, the same directions are its own frame.
+        let l = layout(&format!(
+            "{base}dimension: 3\nsizes: 2 2 2\nspace: LAS\nspace directions: (3,4,0) (0,0,2) (-4,3,0)\n\n"
+        ))
+        .unwrap();
         assert!(l.warnings.is_empty(), "{:?}", l.warnings);
         // Sheared axes (a gantry tilt of 20°): kept as lengths, with a
         // warning naming the axes and their angle.
