@@ -120,8 +120,35 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     let mut vol = finish_volume(path, layout.dims, layout.spacing, layout.ty, decoded)?;
     warnings.extend(header.warnings.iter().cloned());
     warnings.extend(intensity_warning(path, &header));
+    if mirrored(&header) {
+        warnings.push(format!(
+            "{}: its TransformMatrix reverses the handedness of its space (a negative determinant: an odd number of axes stored in reverse); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
+            path.display()
+        ));
+    }
     vol.warnings = warnings;
     Ok(vol)
+}
+
+/// Whether the header's 3×3 orientation (`TransformMatrix`, or its MetaIO
+/// synonyms `Rotation` and `Orientation`) has a negative determinant: in
+/// index order, as snell renders, the volume is then the scan's mirror
+/// image. A matrix that is not nine finite numbers says nothing.
+fn mirrored(header: &Header) -> bool {
+    let Some(text) = ["TransformMatrix", "Rotation", "Orientation"]
+        .iter()
+        .find_map(|n| header.get(n))
+    else {
+        return false;
+    };
+    let m: Vec<f64> = text
+        .split_whitespace()
+        .map_while(|v| v.parse::<f64>().ok().filter(|x| x.is_finite()))
+        .collect();
+    let [a, b, c, d, e, f, g, h, i] = m[..] else {
+        return false;
+    };
+    a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0.0
 }
 
 /// Writes `vol` as an attached MetaImage (`.mha`): the header ITK writes
@@ -815,6 +842,33 @@ mod tests {
         let v = d.read("c.mha", &f).unwrap();
         expect_samples(&v);
         assert_eq!(v.spacing(), [2.0, 2.0, 3.0]);
+    }
+
+    /// A reflecting TransformMatrix warns that the render is a mirror
+    /// image; the identity and a rotation (two axes reversed) do not.
+    #[test]
+    fn mirrored_transform_is_told() {
+        let d = Dir::new("mirror");
+        for (i, (matrix, warns)) in [
+            ("1 0 0 0 1 0 0 0 1", false),
+            ("-1 0 0 0 -1 0 0 0 1", false),
+            ("-1 0 0 0 1 0 0 0 1", true),
+            ("0 1 0 1 0 0 0 0 1", true),
+        ]
+        .into_iter()
+        .enumerate()
+        {
+            let mut f = header(&format!("TransformMatrix = {matrix}\n"), "LOCAL").into_bytes();
+            f.extend(samples(Endian::Little));
+            let v = d.read(&format!("m{i}.mha"), &f).unwrap();
+            expect_samples(&v);
+            assert_eq!(
+                v.warnings.iter().any(|w| w.contains("mirror image")),
+                warns,
+                "{matrix}: {:?}",
+                v.warnings
+            );
+        }
     }
 
     #[test]

@@ -37,6 +37,9 @@ struct Header {
     spacing: [f64; 3],
     vox_offset: u64,
     scale: Option<(f64, f64)>,
+    /// The orientation (sform, else qform) reverses RAS's handedness: in
+    /// index order, as snell renders, the volume is the scan's mirror image.
+    mirrored: bool,
 }
 
 /// Reads a `.nii` or `.nii.gz` file.
@@ -86,7 +89,14 @@ fn decode(
     } else {
         h.ty
     };
-    finish_volume(path, h.dims, h.spacing, ty, decoded)
+    let mut vol = finish_volume(path, h.dims, h.spacing, ty, decoded)?;
+    if h.mirrored {
+        vol.warnings.push(format!(
+            "{}: its orientation (sform, else qform) reverses the handedness of its space (stored in radiological order, say); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
+            path.display()
+        ));
+    }
+    Ok(vol)
 }
 
 /// Uncompressed: decode straight from a map of the file. Bytes after the image
@@ -230,6 +240,9 @@ const OFF_VOX_OFFSET: usize = 108;
 const OFF_SCL_SLOPE: usize = 112;
 const OFF_SCL_INTER: usize = 116;
 const OFF_MAGIC: usize = 344;
+const OFF_QFORM_CODE: usize = 252;
+const OFF_SFORM_CODE: usize = 254;
+const OFF_SROW_X: usize = 280;
 
 /// Parses and validates the header (`bytes` holds at least 348 bytes).
 fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, VolumeError> {
@@ -365,6 +378,21 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, VolumeError> {
         None
     };
 
+    // Orientation, as NIfTI's methods 3 and 2 give it (method 1, neither
+    // code set, has none): the sform's 3×3 part, else the qform, whose
+    // quaternion is a rotation and whose qfac (pixdim[0], -1 or else 1)
+    // reverses the third axis. Only a grid with three axes has a handedness.
+    let mirrored = ndim >= 3
+        && if f.i16(OFF_SFORM_CODE) > 0 {
+            let r = |row: usize, col: usize| f64::from(f.f32(OFF_SROW_X + 16 * row + 4 * col));
+            let det = r(0, 0) * (r(1, 1) * r(2, 2) - r(1, 2) * r(2, 1))
+                - r(0, 1) * (r(1, 0) * r(2, 2) - r(1, 2) * r(2, 0))
+                + r(0, 2) * (r(1, 0) * r(2, 1) - r(1, 1) * r(2, 0));
+            det < 0.0
+        } else {
+            f.i16(OFF_QFORM_CODE) > 0 && f.f32(OFF_PIXDIM) < 0.0
+        };
+
     Ok(Header {
         dims,
         ty,
@@ -372,6 +400,7 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, VolumeError> {
         spacing,
         vox_offset,
         scale,
+        mirrored,
     })
 }
 
@@ -471,9 +500,42 @@ mod tests {
                     spacing: [0.5, 2.0, 1.0],
                     vox_offset: 352,
                     scale: None,
+                    mirrored: false,
                 }
             );
         }
+    }
+
+    /// A mirroring orientation warns, whichever form gives it; a rotation
+    /// (two axes reversed) and a header without orientation do not.
+    #[test]
+    fn mirrored_orientations_are_told() {
+        let with = |sform: Option<[[f32; 3]; 3]>, qfac: Option<f32>| {
+            let mut h = basic(Endian::Little);
+            if let Some(rows) = sform {
+                h[OFF_SFORM_CODE..OFF_SFORM_CODE + 2].copy_from_slice(&2i16.to_le_bytes());
+                for (i, row) in rows.iter().enumerate() {
+                    for (j, v) in row.iter().enumerate() {
+                        let o = OFF_SROW_X + 16 * i + 4 * j;
+                        h[o..o + 4].copy_from_slice(&v.to_le_bytes());
+                    }
+                }
+            }
+            if let Some(q) = qfac {
+                h[OFF_QFORM_CODE..OFF_QFORM_CODE + 2].copy_from_slice(&1i16.to_le_bytes());
+                h[OFF_PIXDIM..OFF_PIXDIM + 4].copy_from_slice(&q.to_le_bytes());
+            }
+            parse_header(Path::new(P), &h).unwrap().mirrored
+        };
+        let flip_x = [[-1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0]];
+        let turn = [[-1.0, 0.0, 0.0], [0.0, -1.0, 0.0], [0.0, 0.0, 1.0]];
+        assert!(!with(None, None));
+        assert!(with(Some(flip_x), None));
+        assert!(!with(Some(turn), None));
+        assert!(with(None, Some(-1.0)));
+        assert!(!with(None, Some(1.0)));
+        // The sform rules where both are set.
+        assert!(!with(Some(turn), Some(-1.0)));
     }
 
     #[test]
