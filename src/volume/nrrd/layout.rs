@@ -106,7 +106,7 @@ impl Layout {
             .into_iter()
             .chain(mirrored(f, &axes).then(|| {
                 format!(
-                    "{}: the space directions reverse the grid's handedness (a negative determinant: an odd number of axes stored in reverse); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
+                    "{}: its space directions reverse the handedness of its space (an odd number of axes stored in reverse); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
                     path.display()
                 )
             }))
