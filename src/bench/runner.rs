@@ -122,6 +122,9 @@ pub(super) struct Runner<'a> {
     caches: HashMap<String, Cache>,
     truths: HashMap<String, Truth>,
     quality_refs: HashMap<String, Arc<RgbImage>>,
+    /// Content hashes by volume ([`Cache::volume_key`]), for the rows'
+    /// frame ids: one pass over each volume, not one per configuration.
+    volume_hashes: HashMap<String, u64>,
     builds: Vec<BuildResult>,
     references: Vec<ReferenceResult>,
     warnings: Vec<String>,
@@ -148,6 +151,7 @@ impl<'a> Runner<'a> {
             caches: HashMap::new(),
             truths: HashMap::new(),
             quality_refs: HashMap::new(),
+            volume_hashes: HashMap::new(),
             builds: Vec::new(),
             references: Vec::new(),
             warnings: Vec::new(),
@@ -516,7 +520,11 @@ not per configuration"
             .map(|_| render::render(&scene, &prep, None))
             .collect();
         let peak = machine::peak_rss_mib();
-        let frame_id = scene.frame_fingerprint(prep.volume_hash()).to_string();
+        let volume_hash = *self
+            .volume_hashes
+            .entry(Cache::volume_key(&scene))
+            .or_insert_with(|| prep.volume_hash());
+        let frame_id = scene.frame_fingerprint(volume_hash).to_string();
         drop(prep);
 
         let times: Vec<f64> = frames

@@ -121,10 +121,7 @@ pub fn read(path: &Path, opts: &LoadOptions) -> Result<Volume, VolumeError> {
     warnings.extend(header.warnings.iter().cloned());
     warnings.extend(intensity_warning(path, &header));
     if mirrored(&header) {
-        warnings.push(format!(
-            "{}: its TransformMatrix reverses the handedness of its space (a negative determinant: an odd number of axes stored in reverse); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
-            path.display()
-        ));
+        warnings.push(super::mirror_warning(path, "its TransformMatrix"));
     }
     vol.warnings = warnings;
     Ok(vol)
@@ -148,7 +145,7 @@ fn mirrored(header: &Header) -> bool {
     let [a, b, c, d, e, f, g, h, i] = m[..] else {
         return false;
     };
-    a * (e * i - f * h) - b * (d * i - f * g) + c * (d * h - e * g) < 0.0
+    super::reverses_handedness([[a, b, c], [d, e, f], [g, h, i]])
 }
 
 /// Writes `vol` as an attached MetaImage (`.mha`): the header ITK writes

@@ -529,6 +529,26 @@ pub fn checked_sample_count(
     Ok(n)
 }
 
+/// Whether a 3×3 orientation (rows or columns: the sign is the same) has a
+/// negative determinant: its axes, in index order, form a frame of the
+/// other handedness, so the grid rendered as snell renders it (index order,
+/// grid coordinates × spacing) is the scan's mirror image.
+pub(crate) fn reverses_handedness(m: [[f64; 3]; 3]) -> bool {
+    let det = m[0][0] * (m[1][1] * m[2][2] - m[1][2] * m[2][1])
+        - m[0][1] * (m[1][0] * m[2][2] - m[1][2] * m[2][0])
+        + m[0][2] * (m[1][0] * m[2][1] - m[1][1] * m[2][0]);
+    det < 0.0
+}
+
+/// The warning of a file whose orientation (`what`, the format's field)
+/// reverses its space's handedness ([`reverses_handedness`]).
+pub(crate) fn mirror_warning(path: &Path, what: &str) -> String {
+    format!(
+        "{}: {what} reverses the handedness of its space (an odd number of axes stored in reverse, as in radiological order); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
+        path.display()
+    )
+}
+
 /// What [`f32`] samples of `values` should be stored relative to: the
 /// midpoint of their range where `f32` rounds some of them and the range is
 /// narrow beside their magnitude (under half the largest), so relative to

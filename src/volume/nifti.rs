@@ -91,9 +91,9 @@ fn decode(
     };
     let mut vol = finish_volume(path, h.dims, h.spacing, ty, decoded)?;
     if h.mirrored {
-        vol.warnings.push(format!(
-            "{}: its orientation (sform, else qform) reverses the handedness of its space (stored in radiological order, say); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
-            path.display()
+        vol.warnings.push(super::mirror_warning(
+            path,
+            "its orientation (sform, else qform)",
         ));
     }
     Ok(vol)
@@ -384,11 +384,9 @@ fn parse_header(path: &Path, bytes: &[u8]) -> Result<Header, VolumeError> {
     // reverses the third axis. Only a grid with three axes has a handedness.
     let mirrored = ndim >= 3
         && if f.i16(OFF_SFORM_CODE) > 0 {
-            let r = |row: usize, col: usize| f64::from(f.f32(OFF_SROW_X + 16 * row + 4 * col));
-            let det = r(0, 0) * (r(1, 1) * r(2, 2) - r(1, 2) * r(2, 1))
-                - r(0, 1) * (r(1, 0) * r(2, 2) - r(1, 2) * r(2, 0))
-                + r(0, 2) * (r(1, 0) * r(2, 1) - r(1, 1) * r(2, 0));
-            det < 0.0
+            super::reverses_handedness(std::array::from_fn(|row| {
+                std::array::from_fn(|col| f64::from(f.f32(OFF_SROW_X + 16 * row + 4 * col)))
+            }))
         } else {
             f.i16(OFF_QFORM_CODE) > 0 && f.f32(OFF_PIXDIM) < 0.0
         };

@@ -78,10 +78,11 @@ fn move_walk<T: Coefficient>(ctx: &Ctx<T>, rays: &mut Rays, i: usize, t: f64) ->
 
 /// `f(p) - iso` at a grid point, clamped into the domain.
 ///
-/// Always inlined: the step march calls it ~577 times a ray, and as a call
-/// (which the compiler chose from c72cfd5 on, once the portable lanes gave
-/// it more callers) each step redid the lookup set-up and spilled the
-/// march's registers: step-0.1 frames 28% slower.
+/// Always inlined: the step march calls it ~577 times a ray (the lobster),
+/// and left to the compiler it became a call from c72cfd5 on (likely once
+/// the portable lanes gave it more callers), which made step-0.1 frames
+/// 28% slower (a call per step; the lost set-up hoisting and register
+/// spills are the likely cost, not inspected in the machine code).
 #[inline(always)]
 pub(crate) fn field_minus_iso<const S: usize, T: Coefficient>(
     ctx: &Ctx<T>,

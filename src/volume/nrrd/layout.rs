@@ -104,12 +104,10 @@ impl Layout {
                 )
             })
             .into_iter()
-            .chain(mirrored(f, &axes).then(|| {
-                format!(
-                    "{}: its space directions reverse the handedness of its space (an odd number of axes stored in reverse); the orientation is dropped and the samples rendered in index order, grid coordinates × spacing, so the volume appears as the scan's mirror image",
-                    path.display()
-                )
-            }))
+            .chain(
+                mirrored(f, &axes)
+                    .then(|| crate::volume::mirror_warning(path, "its 'space directions' field")),
+            )
             .collect();
 
         let byte_skip = match f.byte_skip.unwrap_or(0) {
@@ -182,9 +180,7 @@ fn mirrored(f: &Fields, axes: &[usize]) -> bool {
     ) else {
         return false;
     };
-    let det = u[0] * (v[1] * w[2] - v[2] * w[1]) - u[1] * (v[0] * w[2] - v[2] * w[0])
-        + u[2] * (v[0] * w[1] - v[1] * w[0]);
-    (det < 0.0) != f.space_left_handed
+    crate::volume::reverses_handedness([u, v, w]) != f.space_left_handed
 }
 
 pub(super) fn join<T: std::fmt::Display>(values: &[T]) -> String {
