@@ -112,6 +112,32 @@ fn sample_prints_csv_in_input_order() {
     );
 }
 
+/// A volume held relative to an offset (f64 values f32 would round) is
+/// sampled at its own values, the offset added back.
+#[test]
+fn sample_adds_a_volume_offset_back() {
+    let t = Tmp::new("sample-offset");
+    let values: Vec<f64> = (0..8).map(|i| 101325.0 + 1e-6 * i as f64).collect();
+    let mut nrrd =
+        b"NRRD0004\ntype: double\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nendian: little\n\n"
+            .to_vec();
+    for v in &values {
+        nrrd.extend_from_slice(&v.to_le_bytes());
+    }
+    t.write("p.nrrd", &nrrd);
+    t.write("pts.txt", b"0,0,0\n1,1,1\n");
+    let o = ok(t.run("sample p.nrrd --filter linear --points pts.txt"));
+    let out = String::from_utf8_lossy(&o.stdout);
+    let got: Vec<f64> = out
+        .lines()
+        .skip(1)
+        .map(|l| l.split(',').nth(3).unwrap().parse().unwrap())
+        .collect();
+    for (g, w) in got.iter().zip([values[0], values[7]]) {
+        assert!((g - w).abs() <= 1e-12, "{out}");
+    }
+}
+
 #[test]
 fn phantom_writes_loadable_nrrd_and_metaimage() {
     let t = Tmp::new("phantom");

@@ -332,6 +332,36 @@ fn cases() -> Vec<Case> {
             },
         ),
         (
+            "signed distance at iso 0 with a fill value: 20 - r about the grid's centre, one corner sample 1e20",
+            "a value far from the surface moves it nowhere: hits bitwise equal to the render without the fill value",
+            || {
+                let dims = sphere_volume(1.0).dims();
+                let c = dims.map(|n| (n - 1) as f64 / 2.0);
+                let sdf = |x: f64, y: f64, z: f64| {
+                    20.0 - ((x - c[0]).powi(2) + (y - c[1]).powi(2) + (z - c[2]).powi(2)).sqrt()
+                };
+                let plain = volume(dims, sdf);
+                let mut filled = plain.samples().to_vec();
+                filled[0] = 1e20;
+                let filled = Volume::new(dims, [1.0; 3], SampleType::F32, filled).unwrap();
+                let set = ["surface.iso=0", "surface.filter=linear"];
+                let a = render(&sphere(48, &set), Some(plain));
+                let b = render(&sphere(48, &set), Some(filled));
+                let c = cmp(&b, &a.film.hits());
+                let refracted = c.refracted.pixels;
+                assert!(refracted > 0, "the sphere refracts: {c:?}");
+                let bits = |f: &Frame| {
+                    let h = f.film.hits();
+                    h.u.iter()
+                        .chain(&h.v)
+                        .map(|x| x.to_bits())
+                        .collect::<Vec<_>>()
+                };
+                assert!(bits(&a) == bits(&b), "{c:?}");
+                format!("bitwise equal, {refracted} refracted pixels")
+            },
+        ),
+        (
             "tiny gradient: sphere values x 1e-30 (iso 0.5e-30)",
             "scale invariant: events equal to the unscaled render on >= 99.5%, p99 <= 1e-3 squares",
             || {
@@ -353,37 +383,62 @@ fn cases() -> Vec<Case> {
             },
         ),
         (
-            "offset: f64 sphere values + 101325 (a pressure's scale; iso 101325.5), f64, f32 and f16 coefficients",
-            "stored relative to an offset, as precise as the f32 values near the iso: in each storage, events equal to the unshifted render on every pixel, p90 <= 1e-3 and p99 <= 0.05 squares",
+            "offset: f64 sphere values + 101325 (a pressure's scale; iso 101325.5), and sphere values x 1e-6 + 101325 (iso 101325 + 0.5e-6), f64, f32 and f16 coefficients",
+            "stored relative to an offset, as precise as the unshifted values the shifted ones hold, in the same storage: against their f64 render, at most 2x the event and validity mismatches of their render in that storage (none in f64), p90 and p99 within 2x its own plus 1e-3 and 0.05 squares",
             || {
                 let v = sphere_volume(1.0);
-                let shifted: Vec<f64> = v.samples().iter().map(|&x| 101325.0 + x as f64).collect();
-                let vol = Volume::from_f64(v.dims(), [1.0; 3], SampleType::F64, &shifted).unwrap();
-                assert!(
-                    vol.offset() != 0.0,
-                    "f32 rounds these values: an offset is needed"
-                );
                 let mut out = Vec::new();
-                for storage in ["f64", "f32", "f16"] {
-                    let coefficients = format!("render.coefficients={storage}");
-                    let f = render(
-                        &sphere(48, &["surface.iso=101325.5", &coefficients]),
-                        Some(vol.clone()),
-                    );
-                    let one = render(&sphere(48, &[&coefficients]), Some(v.clone()));
-                    let c = cmp(&f, &one.film.hits());
+                // A variation of 1e-6 lies 1e-11 below the offset, the scale
+                // of the iso-value's nudge were it taken from the offset.
+                for scale in [1.0, 1e-6] {
+                    let shifted: Vec<f64> = v
+                        .samples()
+                        .iter()
+                        .map(|&x| 101325.0 + scale * x as f64)
+                        .collect();
+                    let vol =
+                        Volume::from_f64(v.dims(), [1.0; 3], SampleType::F64, &shifted).unwrap();
                     assert!(
-                        c.events_equal_fraction == 1.0
-                            && c.squares(c.p90) <= 1e-3
-                            && c.squares(c.p99) <= 0.05,
-                        "{storage}: {c:?}"
+                        vol.offset() != 0.0,
+                        "f32 rounds these values: an offset is needed"
                     );
-                    out.push(format!(
-                        "{storage}: events equal {:.2}%, p90 {:.1e}, p99 {:.1e} squares",
-                        100.0 * c.events_equal_fraction,
-                        c.squares(c.p90),
-                        c.squares(c.p99)
-                    ));
+                    // The unshifted values the shifted ones hold (f64 keeps
+                    // 101325 + 1e-6·x to 1.5e-5 of x), so the renders differ
+                    // by what the renderer adds, not by the data's rounding.
+                    let held: Vec<f32> = shifted
+                        .iter()
+                        .map(|&y| ((y - 101325.0) / scale) as f32)
+                        .collect();
+                    let held = Volume::new(v.dims(), [1.0; 3], SampleType::F32, held).unwrap();
+                    let iso = format!("surface.iso={}", 101325.0 + 0.5 * scale);
+                    let wide = render(
+                        &sphere(48, &["render.coefficients=f64"]),
+                        Some(held.clone()),
+                    );
+                    for storage in ["f64", "f32", "f16"] {
+                        let coefficients = format!("render.coefficients={storage}");
+                        let f = render(&sphere(48, &[&iso, &coefficients]), Some(vol.clone()));
+                        let c = cmp(&f, &wide.film.hits());
+                        // What the storage costs the unshifted values.
+                        let one = render(&sphere(48, &[&coefficients]), Some(held.clone()));
+                        let own = cmp(&one, &wide.film.hits());
+                        assert!(
+                            c.event_mismatch + c.validity_mismatch
+                                <= 2 * (own.event_mismatch + own.validity_mismatch)
+                                && c.squares(c.p90) <= 1e-3 + 2.0 * own.squares(own.p90)
+                                && c.squares(c.p99) <= 0.05 + 2.0 * own.squares(own.p99),
+                            "x {scale:e}, {storage}: {c:?}, unshifted {own:?}"
+                        );
+                        out.push(format!(
+                            "x {scale:e}, {storage}: events equal {:.2}%, p90 {:.1e}, p99 {:.1e} squares (unshifted: {:.2}%, {:.1e}, {:.1e})",
+                            100.0 * c.events_equal_fraction,
+                            c.squares(c.p90),
+                            c.squares(c.p99),
+                            100.0 * own.events_equal_fraction,
+                            own.squares(own.p90),
+                            own.squares(own.p99)
+                        ));
+                    }
                 }
                 out.join("; ")
             },

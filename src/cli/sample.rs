@@ -172,7 +172,9 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let mut out = std::io::BufWriter::new(stdout.lock());
     writeln!(out, "x,y,z,value,gx,gy,gz")?;
     for p in points {
+        // Evaluations are relative to the field's offset (`Field`).
         let (v, g) = field.value_grad(p);
+        let v = field.offset() + v;
         // The shortest round trip of each value, in scientific notation at
         // the extremes (a gradient of 1e-15 is 22 characters positionally).
         let row = [p.x, p.y, p.z, v, g.x, g.y, g.z].map(exact);

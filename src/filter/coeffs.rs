@@ -38,11 +38,6 @@ pub trait Coefficient:
     crate::simd::Row4 + Default + Send + Sync + PartialEq + std::fmt::Debug + 'static
 {
     const NAME: &'static str;
-    /// Whether it holds every `f64` exactly (`f64` itself). Narrower
-    /// storage keeps a volume's samples relative to its offset
-    /// ([`crate::volume::Volume::offset`]): rounding then costs digits of
-    /// the data's own variation, not of a constant added to it.
-    const EXACT: bool = false;
     fn to_f64(self) -> f64;
     fn from_f64(v: f64) -> Self;
     /// The slice itself when the storage is already `f64` (vector kernels
@@ -64,7 +59,6 @@ pub trait Coefficient:
 
 impl Coefficient for f64 {
     const NAME: &'static str = "f64";
-    const EXACT: bool = true;
     #[inline(always)]
     fn to_f64(self) -> f64 {
         self
@@ -133,7 +127,8 @@ impl<T: Coefficient> Coeffs<T> {
     /// The samples themselves, padded (coefficients of non-prefiltered kernels,
     /// and the input of in-place prefiltering), less `frame`: their offset
     /// ([`Volume::offset`]) less `frame` added back in `f64`. A frame of the
-    /// volume's offset keeps the samples as stored ([`Coefficient::EXACT`]).
+    /// volume's offset ([`crate::filter::field::volume_frame`]) keeps the
+    /// samples as stored.
     pub fn from_volume(vol: &Volume, frame: f64) -> Coeffs<T> {
         let shift = vol.offset() - frame;
         Coeffs::from_interior(vol.dims(), vol.samples(), |v: &f32| {

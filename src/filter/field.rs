@@ -61,16 +61,30 @@ macro_rules! with_support {
 /// part. The renderer and the classifications compare evaluations only
 /// with [`Field::separating_iso`], which maps the scene's iso-value into
 /// the same frame, and the surface's normal is the gradient's direction,
-/// so a shifted and scaled field renders the same surface. `f32` and `f16`
-/// storage of a volume held relative to an offset ([`Volume::offset`]) keep
-/// its samples relative to it, so that they round the data's variation and
-/// not the offset's digits; `f16` storage is centred on the scene's
+/// so a shifted and scaled field renders the same surface. Every storage
+/// keeps a volume held relative to an offset ([`Volume::offset`]) relative
+/// to it ([`volume_frame`]), so that `f32` and `f16` round the data's
+/// variation and not the offset's digits, and the iso-value's nudge above
+/// rounding noise ([`Field::separating_iso`]) scales with the data's
+/// variation, not with the offset (at 1e-11 of 101325 it would move a
+/// surface whose values vary by 1e-6 off the data); `f16` storage is centred on the scene's
 /// iso-value this way: near the surface the
 /// stored values are then small, where `f16`'s absolute precision is
 /// fine, instead of near the iso-value, where its 11 bits round by the
 /// data's scale over 2048; and scaled, so that a field of any magnitude
 /// lies in `f16`'s normal range, neither in its subnormals (a field of
 /// values near 1e-9 would round to zero) nor beyond 65504.
+/// What a field built from `vol` keeps its coefficients relative to: the
+/// volume's offset, or `0.0` (not `-0.0`) for a volume without one, so the
+/// coefficients of such a volume are its samples bit for bit.
+pub fn volume_frame(vol: &Volume) -> f64 {
+    if vol.offset() == 0.0 {
+        0.0
+    } else {
+        vol.offset()
+    }
+}
+
 #[derive(Clone, Debug)]
 pub struct Field<T: Coefficient = f64> {
     kind: FilterKind,
@@ -78,11 +92,12 @@ pub struct Field<T: Coefficient = f64> {
     coeffs: Coeffs<T>,
     /// Largest coefficient magnitude (computed once; see `separating_iso`).
     max_abs: f64,
-    /// Which binary exponents the coefficients' magnitudes have (bit `e` of
-    /// the 2048: a magnitude in `[2^(e−1023), 2^(e−1022))`, zero in bit 0),
-    /// for the largest magnitude below a bound ([`Field::separating_iso`]);
-    /// counted on first use, which only fields with outliers have.
-    exponents: std::sync::OnceLock<[u64; 32]>,
+    /// How many coefficients' magnitudes have each binary exponent (entry
+    /// `e` of the 2048: magnitudes in `[2^(e−1023), 2^(e−1022))`, zero and
+    /// subnormals in entry 0), for their typical magnitude and the largest
+    /// below a bound ([`Field::separating_iso`]); counted on first use,
+    /// which only fields with outliers or an iso-value of 0 have.
+    exponents: std::sync::OnceLock<Box<[u64; 2048]>>,
     /// What the coefficients are relative to (0 unless shifted).
     offset: f64,
     /// The power of two they are multiplied by (1 unless scaled).
@@ -92,12 +107,12 @@ pub struct Field<T: Coefficient = f64> {
 impl<T: Coefficient> Field<T> {
     /// Prefilters `vol` for `kind` in place in the padded grid of `T`
     /// (parallel over lines, each line in `f64`: with `f32` storage that
-    /// rounds once per axis pass) and keeps the coefficients: in `f64` as
-    /// the field's values, in narrower storage relative to the volume's
-    /// offset, the field's [`Field::offset`] (the prefilter maps a
-    /// constant to itself, so the offset passes through it unchanged).
+    /// rounds once per axis pass) and keeps the coefficients relative to the
+    /// volume's offset ([`volume_frame`]), the field's [`Field::offset`] (the
+    /// prefilter maps a constant to itself, so the offset passes through it
+    /// unchanged).
     pub fn new_in(vol: &Volume, kind: FilterKind) -> Field<T> {
-        let frame = if T::EXACT { 0.0 } else { vol.offset() };
+        let frame = volume_frame(vol);
         let mut coeffs = Coeffs::<T>::from_volume(vol, frame);
         let prefilter = kind.prefilter();
         if !prefilter.is_identity() {
@@ -127,14 +142,15 @@ impl Field<f32> {
     /// the tests hold [`Field::new_in`] to).
     pub fn new_f32(vol: &Volume, kind: FilterKind) -> Field<f32> {
         let prefilter = kind.prefilter();
+        let frame = volume_frame(vol);
         let coeffs = if prefilter.is_identity() {
-            Coeffs::from_volume(vol, vol.offset())
+            Coeffs::from_volume(vol, frame)
         } else {
             let mut work: Vec<f64> = vol.samples().iter().map(|&v| v as f64).collect();
             prefilter.apply_3d(&mut work, vol.dims());
             Coeffs::from_interior(vol.dims(), &work, |v: &f64| *v as f32)
         };
-        Field::from_coeffs(kind, coeffs).with_frame(vol.offset(), 1.0)
+        Field::from_coeffs(kind, coeffs).with_frame(frame, 1.0)
     }
 }
 
@@ -220,11 +236,14 @@ impl<T: Coefficient> Field<T> {
     /// geometric tolerance, makes "equal to the iso-value" reliably outside.
     ///
     /// The scale is the largest coefficient magnitude up to a million times
-    /// the iso-value's (any, for an iso-value of 0): a sentinel or fill value
+    /// the iso-value's or the coefficients' typical one (the median of the
+    /// nonzero magnitudes), whichever is larger: a sentinel or fill value
     /// far beyond the data (1e20, NetCDF's 9.97e36) would otherwise move the
-    /// whole surface by its 1e-11, or off the data altogether. Magnitudes
-    /// are counted by binary exponent ([`Field::from_coeffs`]), so the scale
-    /// is the bound of the largest one's power of two, within 2× of it.
+    /// whole surface by its 1e-11, or off the data altogether, and the
+    /// typical magnitude bounds it where the iso-value cannot (an iso-value
+    /// of 0, a signed distance's). Magnitudes are counted by binary exponent
+    /// ([`Field::from_coeffs`]), so the scale is the bound of the largest
+    /// one's power of two, within 2× of it.
     ///
     /// The result is in the frame of the stored coefficients (`iso` less
     /// [`Field::offset`], times [`Field::scale`]): what evaluations are
@@ -235,35 +254,52 @@ impl<T: Coefficient> Field<T> {
         iso + 1e-11 * iso.abs().max(magnitude).max(f64::MIN_POSITIVE)
     }
 
-    /// The largest coefficient magnitude not above `bound` (a 0 bound: none),
-    /// rounded up to its power of two; the largest of all where none is
-    /// that small.
+    /// The largest coefficient magnitude not above `bound` or a million
+    /// times the typical one, whichever is larger, rounded up to its power
+    /// of two; the largest of all where none is that small.
     fn magnitude_up_to(&self, bound: f64) -> f64 {
-        if bound == 0.0 || self.max_abs <= bound {
+        if self.max_abs <= bound {
             return self.max_abs;
         }
         let exponent = |a: f64| ((a.to_bits() >> 52) & 0x7ff) as usize;
-        let exponents = self.exponents.get_or_init(|| {
+        // The upper bound of exponent `e`'s magnitudes.
+        let power = |e: usize| f64::from_bits(((e as u64 + 1).min(0x7fe)) << 52);
+        let counts = self.exponents.get_or_init(|| {
             use rayon::prelude::*;
             self.coeffs
                 .data()
                 .par_chunks(1 << 16)
                 .map(|chunk| {
-                    let mut set = [0u64; 32];
+                    let mut counts = Box::new([0u64; 2048]);
                     for c in chunk {
-                        let e = exponent(c.to_f64().abs());
-                        set[e / 64] |= 1 << (e % 64);
+                        counts[exponent(c.to_f64().abs())] += 1;
                     }
-                    set
+                    counts
                 })
-                .reduce(|| [0; 32], |a, b| std::array::from_fn(|i| a[i] | b[i]))
+                .reduce(
+                    || Box::new([0; 2048]),
+                    |mut a, b| {
+                        a.iter_mut().zip(b.iter()).for_each(|(x, y)| *x += y);
+                        a
+                    },
+                )
         });
+        let nonzero: u64 = counts[1..].iter().sum();
+        let mut below = 0;
+        let typical = (1..2048)
+            .find(|&e| {
+                below += counts[e];
+                2 * below >= nonzero
+            })
+            .map_or(0.0, power);
+        let bound = bound.max(1e6 * typical);
+        if bound == 0.0 || self.max_abs <= bound {
+            return self.max_abs;
+        }
         (0..=exponent(bound))
             .rev()
-            .find(|&e| exponents[e / 64] >> (e % 64) & 1 == 1)
-            .map_or(self.max_abs, |e| {
-                f64::from_bits(((e as u64 + 1).min(0x7fe)) << 52).min(bound)
-            })
+            .find(|&e| counts[e] > 0)
+            .map_or(self.max_abs, |e| power(e).min(bound))
     }
 
     /// Maps a grid coordinate into the domain `[0, n-1]` by the mirror symmetry
@@ -763,19 +799,23 @@ mod tests {
         // The ramp's largest value rounded up to its power of two (64).
         assert!(near(eps(&f, 10.0), 1e-11 * 64.0));
         assert!(eps(&f, 10.0) >= eps(&plain, 10.0));
-        assert!(near(eps(&f, 0.0), 1e-11 * f.max_abs_coeff()));
+        // At 0 the typical magnitude bounds the scale in the iso-value's
+        // place (a signed distance with a fill value lost its surface).
+        assert!(near(eps(&f, 0.0), 1e-11 * 64.0));
         // Everything beyond the bound: the largest of all, as before.
         let big = Volume::new([2; 3], [1.0; 3], SampleType::F32, vec![1e30; 8]).unwrap();
         let f = Field::new(&big, FilterKind::Linear);
         assert!(near(eps(&f, 1.0), 1e-11 * 1e30f32 as f64));
     }
 
-    /// A volume held relative to an offset keeps it in narrow storage: the
+    /// A volume held relative to an offset keeps it in every storage: narrow
     /// coefficients round the data's own variation, as those of the same
     /// values unshifted do, not the constant's digits (f32's step at 101325
-    /// is 0.0078).
+    /// is 0.0078), and the iso-value's nudge is as small beside the data's
+    /// variation as unshifted (1e-11 of 101325, 1e-6, would move a surface
+    /// whose values vary by 1e-6 off the data).
     #[test]
-    fn narrow_storage_keeps_the_volume_offset() {
+    fn storage_keeps_the_volume_offset() {
         let dims = [12, 11, 10];
         let base = crate::volume::scrambled_u8(dims, 5);
         let values = |shift: f64| -> Vec<f64> {
@@ -802,12 +842,13 @@ mod tests {
         // its f64 field.
         let worst = |vol: &Volume, kind: FilterKind| -> [f64; 2] {
             let exact = Field::new(vol, kind);
+            assert_eq!(exact.offset(), volume_frame(vol));
             let narrow = [Field::<f32>::new_in(vol, kind), Field::new_f32(vol, kind)];
             narrow.map(|f| {
-                assert_eq!(f.offset(), vol.offset());
+                assert_eq!(f.offset(), volume_frame(vol));
                 points
                     .iter()
-                    .map(|&p| (f.offset() + f.value(p) - exact.value(p)).abs())
+                    .map(|&p| (f.value(p) - exact.value(p)).abs())
                     .fold(0.0f64, f64::max)
             })
         };
@@ -818,9 +859,19 @@ mod tests {
                 // (beyond f64's own rounding of sums near 101325)
                 assert!(b[k] <= 2.0 * a[k] + 1e-9, "{name} {k}: {b:?} against {a:?}");
             }
-            // The iso-value maps into the coefficients' frame.
+            // The iso-value maps into the coefficients' frame, nudged by
+            // 1e-11 of the data's scale (about 36), as unshifted.
+            let iso = 101330.0;
             let f = Field::new_f32(&shifted, kind);
-            assert!((f.separating_iso(101330.0) - (101330.0 - shifted.offset())).abs() < 1e-6);
+            assert!((f.separating_iso(iso) - (iso - shifted.offset())).abs() < 1e-6);
+            let f = Field::new(&shifted, kind);
+            let nudge = f.separating_iso(iso) - (iso - shifted.offset());
+            let unshifted =
+                Field::new(&plain, kind).separating_iso(iso - 101325.0) - (iso - 101325.0);
+            assert!(
+                nudge > 0.0 && nudge <= 2.0 * unshifted,
+                "{name}: {nudge:e} against {unshifted:e}"
+            );
         }
     }
 

@@ -470,7 +470,9 @@ pub fn containing_box(
     let field = crate::filter::Field::new(vol, interp.filter());
     let bound = crate::classify::bound::CellBound::new(field.kernel());
     let count = if m.scale > 0.0 { 1.0 / m.scale } else { 0.0 };
-    let threshold = iso - count - 1e-6 * iso.abs().max(count);
+    let threshold = iso - count - 1e-6 * iso.abs().max(count) - field.offset();
+    // The bounds are relative to the field's offset, as its evaluations are.
+    let iso = iso - field.offset();
     let [cx, cy, cz] = dims.map(|n| n - 1);
     let merge =
         |a: Option<([usize; 3], [usize; 3])>, b: Option<([usize; 3], [usize; 3])>| match (a, b) {
@@ -558,7 +560,7 @@ mod tests {
                     p / ((k + 1) * (k + 1)),
                 ]
                 .map(|i| i as f64 / 4.0);
-                if field.value(glam::DVec3::from(g)) > iso {
+                if field.offset() + field.value(glam::DVec3::from(g)) > iso {
                     for a in 0..3 {
                         assert!(
                             lo[a] as f64 <= g[a] && g[a] <= hi[a] as f64,

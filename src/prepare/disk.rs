@@ -14,7 +14,7 @@ use crate::filter::coeffs::{Coefficient, Coeffs};
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
 use crate::scene::Storage;
-use crate::volume::WordHash;
+use crate::volume::{Volume, WordHash};
 
 // Version 2 ends each file with a checksum of its values; tags files of
 // version 3 hold the sub-cell masks too (older files are ignored and
@@ -59,6 +59,19 @@ pub(super) fn field_name(filter: FilterKind, storage: Storage, centre: f64) -> S
             storage.name(),
             centre.to_bits()
         ),
+    }
+}
+
+/// The file of a field's coefficients, `name` its [`field_name`]: `f64`
+/// coefficients of a volume with an offset are stored relative to it, which
+/// older files of such a volume were not, so theirs are `relative` too
+/// (those of the volumes without one, the same either way, keep their
+/// names).
+pub(super) fn coef_file_name(name: &str, storage: Storage, vol: &Volume) -> String {
+    if storage == Storage::F64 && vol.offset() != 0.0 {
+        format!("{name}-relative.coef")
+    } else {
+        format!("{name}.coef")
     }
 }
 

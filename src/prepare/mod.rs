@@ -22,6 +22,7 @@ use crate::classify::{
     self, CurvatureBounds, Method, PlaneBounds, SubCellMasks, TaggedIndex, Tags, curvature, plane,
 };
 use crate::filter::coeffs::Coefficient;
+use crate::filter::field::volume_frame;
 use crate::filter::{Field, FilterKind};
 use crate::lattice::Lattice;
 use crate::octree::{Octree, Proximity};
@@ -32,7 +33,8 @@ use crate::volume::{LoadOptions, Volume};
 mod disk;
 
 use disk::{
-    field_name, read_curvature, read_field, read_tags, write_curvature, write_field, write_tags,
+    coef_file_name, field_name, read_curvature, read_field, read_tags, write_curvature,
+    write_field, write_tags,
 };
 
 /// Runs `$body` with `$f` bound to the `&Arc<Field<T>>` inside an
@@ -605,7 +607,7 @@ impl Cache {
             Some(f) => f.clone(),
             None => {
                 let start = Instant::now();
-                let disk = self.disk_path(hash, &format!("{}.coef", fkey.1));
+                let disk = self.disk_path(hash, &coef_file_name(&fkey.1, storage, &volume));
                 let loaded = disk
                     .as_deref()
                     .and_then(|p| self.read_field(p, filter, storage, centre, &volume));
@@ -715,12 +717,11 @@ impl Cache {
             return None;
         }
         let read = match storage {
-            Storage::F64 => {
-                read_field(path, filter, vol.dims()).map(|f| AnyField::F64(Arc::new(f)))
-            }
             // Stored relative to the volume's offset (`Field::new_in`).
+            Storage::F64 => read_field(path, filter, vol.dims())
+                .map(|f: Field<f64>| AnyField::F64(Arc::new(f.with_frame(volume_frame(vol), 1.0)))),
             Storage::F32 => read_field(path, filter, vol.dims())
-                .map(|f: Field<f32>| AnyField::F32(Arc::new(f.with_frame(vol.offset(), 1.0)))),
+                .map(|f: Field<f32>| AnyField::F32(Arc::new(f.with_frame(volume_frame(vol), 1.0)))),
             // Stored less `centre` (the file's name says which), times the
             // scale the volume and the centre give.
             Storage::F16 => read_field(path, filter, vol.dims()).map(|f: Field<half::f16>| {
