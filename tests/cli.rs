@@ -710,6 +710,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("flag", "merge -o over a part", "merge k0.exr k1.exr -o k1.exr", &["k1.exr", "input"]),
         bad("flag", "-o over the backdrop photograph", "render bd.toml -o bd.png", &["bd.png", "input"]),
         bad("flag", "export-pov over its own scene file", "export-pov scene.pov .", &["scene.pov", "input"]),
+        bad("flag", "export-pov into a folder whose parent is missing", "export-pov ok.toml missing/pov", &["missing/pov", "cannot create directory"]),
         bad("flag", "bench --update a device", "bench --update /dev/null", &["/dev/null", "regular file"]),
         bad("flag", "--set without =", "render {sphere} -o out.png --set nonsense", &["--set nonsense"]),
         bad("flag", "-o into a missing directory", "render {sphere} -o /nonexistent-dir/x.png", &["/nonexistent-dir"]),
@@ -805,6 +806,7 @@ fn bad_inputs_fail_cleanly_without_output() {
         bad("scene", "reference of a sphere its grid clips", "reference {sphere} --hits h.exr --set volume.phantom.size=16", &["does not fit"]),
         bad("scene", "spacing ratio beyond 1e6", "render {sphere} -o out.png --set volume.spacing=[1e-15,1,1]", &["volume.spacing", "1e6"]),
         bad("scene", "a JPEG backdrop cut short", "render cut.toml -o out.png", &["cut.jpg", "end-of-image"]),
+        bad("scene", "an EXR as the backdrop photograph", "render bd.toml -o out.png --set backdrop.image=\"k0.exr\"", &["k0.exr", "not a PNG or JPEG image"]),
         bad("file", "compare: a JPEG cut short", "compare cut.jpg cut.jpg", &["cut.jpg", "end-of-image"]),
         bad("file", "compare: a PNG header claiming 10^10 pixels", "compare huge.png bd.png", &["huge.png", "100000x100000"]),
         Bad {
@@ -1265,6 +1267,13 @@ fn image_over_the_memory_limit_is_refused() {
     assert!(!exists("big.png"));
     // 32² pixels (96 KiB) and the 64³ u8 phantom (4.3 MiB) fit.
     ok(render("small", 32, " --hits small.exr"));
+    // A tile larger than the image holds the image's rays only: 16² pixels
+    // of 16 rays, not 256² of them (hundreds of MiB).
+    ok(render(
+        "tiled",
+        16,
+        " --set render.supersampling=grid --set render.samples=4 --set render.tile=256",
+    ));
     assert!(exists("small.png") && exists("small.exr"));
     // 256² pixels (6.4 MiB) fit alone, and so does the phantom, but not
     // both: the volume gets what the image leaves.

@@ -463,6 +463,12 @@ fn nrrd_ascii_values() {
             .contains("ascii value 1 ('1e50') is beyond f32's range"),
         "{e}"
     );
+    let e = read("big64.nrrd", "double", "1 2 -1e400 4").unwrap_err();
+    assert!(
+        e.to_string()
+            .contains("ascii value 2 ('-1e400') is beyond f64's range"),
+        "{e}"
+    );
     let e = read("inf.nrrd", "float", "1 -inf 3 4").unwrap_err();
     assert!(matches!(e, VolumeError::NonFinite { inf: 1, .. }), "{e}");
 }

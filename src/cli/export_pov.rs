@@ -118,13 +118,35 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     let written: Vec<&std::path::Path> = written.iter().map(|p| p.as_path()).collect();
     check_distinct(&written, &scene.input_files())?;
     let vol = scene.load_volume(&LoadOptions::default())?;
-    std::fs::create_dir_all(&a.dir)
-        .with_context(|| format!("{}: cannot create directory", a.dir.display()))?;
+    // The folder itself, not a missing chain above it (as `--cache`): a
+    // mistyped parent is an error, not a tree of new folders.
+    let created = !a.dir.exists();
+    if created {
+        std::fs::create_dir(&a.dir)
+            .with_context(|| format!("{}: cannot create directory", a.dir.display()))?;
+    }
     if let Some(h) = &a.hits {
         check_output(h)?;
     }
     let dir = a.dir.canonicalize().unwrap_or_else(|_| a.dir.clone());
-    let ex = povray::export(&dir, &scene, &vol, &opts)?;
+    // The export's files appear together or not at all (a full disk on
+    // the third left the first two), and a folder made for them goes too.
+    let held = snell::atomic::hold();
+    // (A failed commit names its file.)
+    let exported = povray::export(&dir, &scene, &vol, &opts)
+        .map_err(anyhow::Error::from)
+        .and_then(|ex| held.commit().map(|()| ex).map_err(anyhow::Error::from));
+    let ex = match exported {
+        Ok(ex) => ex,
+        Err(e) => {
+            drop(held);
+            if created {
+                let _ = std::fs::remove_dir(&a.dir);
+            }
+            return Err(e);
+        }
+    };
+    drop(held);
     // POV-Ray interpolates trilinearly or by Catmull-Rom only: a scene of
     // another filter is exported with the nearest, another surface.
     let pov_filter = ex.interpolation.filter();

@@ -118,7 +118,7 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     scene.check_memory(limit, workers, window.map(|_| (w, h)))?;
     // The volume and its structures get what the image leaves of the limit:
     // each could pass alone where both together exceed it.
-    let (frame_bytes, scratch_bytes) = scene.memory_need_of(u64::from(w) * u64::from(h), workers);
+    let (frame_bytes, scratch_bytes) = scene.memory_need_of((w, h), workers);
     let image_bytes = frame_bytes.saturating_add(scratch_bytes);
     let load = LoadOptions {
         memory_limit: limit.saturating_sub(image_bytes),

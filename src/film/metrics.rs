@@ -45,7 +45,14 @@ impl RgbImage {
                 pixels: (0..r.len()).map(|i| [r[i], g[i], b[i]]).collect(),
             });
         }
-        super::photo::read(path).map_err(err)
+        super::photo::read(path)
+            .map_err(|m| match m.as_str() {
+                super::photo::NOT_AN_IMAGE => {
+                    "not an image snell reads (PNG or JPEG, or EXR by its name)".to_string()
+                }
+                _ => m,
+            })
+            .map_err(err)
     }
 }
 

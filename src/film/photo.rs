@@ -12,6 +12,10 @@ use crate::volume::limits::{default_memory_limit, human_bytes};
 /// Largest photograph read, in pixels (2^28: 16384 × 16384).
 pub const MAX_PIXELS: u64 = 1 << 28;
 
+/// What [`read`] says of bytes of no format it reads (a backdrop reads only
+/// these; `compare` reads EXR too, by the file's name, and says so).
+pub const NOT_AN_IMAGE: &str = "not a PNG or JPEG image";
+
 /// Reads the photograph at `path`; the error says why, and the caller
 /// names the file.
 pub fn read(path: &Path) -> Result<RgbImage, String> {
@@ -35,7 +39,7 @@ pub fn read(path: &Path) -> Result<RgbImage, String> {
         image::ImageError::Unsupported(u)
             if matches!(u.kind(), image::error::UnsupportedErrorKind::Format(_)) =>
         {
-            "not an image snell reads (PNG or JPEG, or EXR by its name)".to_string()
+            NOT_AN_IMAGE.to_string()
         }
         e => e.to_string(),
     })?;

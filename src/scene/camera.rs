@@ -129,10 +129,17 @@ impl Camera {
     /// which no traversal can undo; commands warn when this passes a
     /// millionth of a voxel.
     pub fn origin_rounding(&self, centre: DVec3) -> f64 {
-        let d = self
-            .position
-            .length()
-            .max((self.position - centre).length());
+        // Lengths scaled by the largest component, which squaring alone
+        // would overflow past 1e154 (volumes of spacing 1e300 exist).
+        let length = |v: DVec3| {
+            let m = v.abs().max_element();
+            if m > 0.0 && m.is_finite() {
+                m * (v / m).length()
+            } else {
+                m
+            }
+        };
+        let d = length(self.position).max(length(self.position - centre));
         d * f64::EPSILON / 2.0
     }
 
@@ -196,6 +203,37 @@ impl Camera {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The origin's rounding of a volume at 1e301 world units is f64's
+    /// unit roundoff of that distance, not an overflow to infinity.
+    #[test]
+    fn origin_rounding_of_huge_extents_is_finite() {
+        let projection = Projection::Perspective {
+            tan_half_fov: 0.3f64.tan(),
+        };
+        let c = Camera::new(
+            DVec3::new(7.5, 7.5, -40.0),
+            DVec3::new(7.5, 7.5, 0.0),
+            DVec3::Y,
+            projection,
+            64,
+            64,
+        )
+        .unwrap();
+        let centre = DVec3::splat(3e301);
+        let want = 3e301 * 3f64.sqrt() * f64::EPSILON / 2.0;
+        let got = c.origin_rounding(centre);
+        assert!(
+            (got - want).abs() <= 1e-12 * want,
+            "{got:e} against {want:e}"
+        );
+        let near = c.origin_rounding(DVec3::new(7.5, 7.5, 0.0));
+        let want = DVec3::new(7.5, 7.5, -40.0).length() * f64::EPSILON / 2.0;
+        assert!(
+            (near - want).abs() <= 1e-12 * want,
+            "{near:e} against {want:e}"
+        );
+    }
 
     #[test]
     fn directions_are_the_rays_bitwise() {

@@ -472,13 +472,16 @@ impl Scene {
     }
 
     /// Memory a render needs besides the volume: frame buffers for the
-    /// `pixels` of its film (the whole image, or a `--region` part's window
-    /// and apron), and one tile's ray packet per worker thread.
-    pub fn memory_need_of(&self, pixels: u64, threads: usize) -> (u64, u64) {
-        let tile = self.render.tile as u64;
-        let tile_rays = tile * tile * self.rays_per_pixel();
+    /// `w`×`h` pixels of its film (the whole image, or a `--region` part's
+    /// window and apron), and one tile's ray packet per worker thread (a
+    /// tile traces its part of the film, so no more than the film's pixels
+    /// however large `render.tile` is).
+    pub fn memory_need_of(&self, (w, h): (u32, u32), threads: usize) -> (u64, u64) {
+        let tile = self.render.tile;
+        let tile_pixels = u64::from(tile.min(w)) * u64::from(tile.min(h));
+        let tile_rays = tile_pixels * self.rays_per_pixel();
         (
-            pixels * FRAME_BYTES_PER_PIXEL,
+            u64::from(w) * u64::from(h) * FRAME_BYTES_PER_PIXEL,
             threads.max(1) as u64 * tile_rays * TILE_BYTES_PER_RAY,
         )
     }
@@ -504,11 +507,8 @@ impl Scene {
         threads: Option<usize>,
         part: Option<(u32, u32)>,
     ) -> Result<(), SceneError> {
-        let pixels = match part {
-            Some((w, h)) => u64::from(w) * u64::from(h),
-            None => self.width as u64 * self.height as u64,
-        };
-        let (frame, scratch) = self.memory_need_of(pixels, threads.unwrap_or(1));
+        let size = part.unwrap_or((self.width, self.height));
+        let (frame, scratch) = self.memory_need_of(size, threads.unwrap_or(1));
         let need = frame.saturating_add(scratch);
         if need <= limit {
             return Ok(());

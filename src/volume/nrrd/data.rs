@@ -131,6 +131,20 @@ pub(super) fn ascii_region(
                 slot.copy_from_slice(&t.parse::<$t>().map_err(|_| bad())?.to_le_bytes())
             };
         }
+        macro_rules! float {
+            ($t:ty, $range:expr) => {{
+                let v = t.parse::<$t>().map_err(|_| bad())?;
+                let literal = t.trim_start_matches(['+', '-']).to_ascii_lowercase();
+                if v.is_infinite() && !literal.starts_with("inf") {
+                    return Err(fmt(format!(
+                        "ascii value {i} ('{}') is beyond {}",
+                        excerpt(t),
+                        $range
+                    )));
+                }
+                slot.copy_from_slice(&v.to_le_bytes())
+            }};
+        }
         match ty {
             SampleType::I8 => parse!(i8),
             SampleType::U8 => parse!(u8),
@@ -139,22 +153,11 @@ pub(super) fn ascii_region(
             SampleType::I32 => parse!(i32),
             SampleType::U32 => parse!(u32),
             // Rounded once, from the decimal text; a finite number beyond
-            // f32 (which parses as an infinity) is refused as such, as the
-            // binary encodings' are, not called infinite.
-            SampleType::F32 => {
-                let v = t.parse::<f32>().map_err(|_| bad())?;
-                let literal = t.trim_start_matches(['+', '-']).to_ascii_lowercase();
-                if v.is_infinite() && !literal.starts_with("inf") {
-                    return Err(fmt(format!(
-                        "ascii value {i} ('{}') is beyond f32's range (±3.4e38)",
-                        excerpt(t)
-                    )));
-                }
-                slot.copy_from_slice(&v.to_le_bytes())
-            }
-            SampleType::F64 => {
-                slot.copy_from_slice(&t.parse::<f64>().map_err(|_| bad())?.to_le_bytes())
-            }
+            // the type (which parses as an infinity) is refused as such, as
+            // the binary encodings' are beyond f32, not called infinite for
+            // `--allow-nan` to erase.
+            SampleType::F32 => float!(f32, "f32's range (±3.4e38)"),
+            SampleType::F64 => float!(f64, "f64's range (±1.8e308)"),
         }
     }
     Ok((out, values.count() as u64))
