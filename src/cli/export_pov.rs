@@ -130,23 +130,19 @@ pub fn run(a: Args) -> anyhow::Result<()> {
     }
     let dir = a.dir.canonicalize().unwrap_or_else(|_| a.dir.clone());
     // The export's files appear together or not at all (a full disk on
-    // the third left the first two), and a folder made for them goes too.
-    let held = snell::atomic::hold();
-    // (A failed commit names its file.)
-    let exported = povray::export(&dir, &scene, &vol, &opts)
-        .map_err(anyhow::Error::from)
-        .and_then(|ex| held.commit().map(|()| ex).map_err(anyhow::Error::from));
-    let ex = match exported {
-        Ok(ex) => ex,
-        Err(e) => {
-            drop(held);
-            if created {
-                let _ = std::fs::remove_dir(&a.dir);
-            }
-            return Err(e);
-        }
+    // the third left the first two), and a folder made for them goes too;
+    // the hold ends with the block, before POV-Ray reads them. (A failed
+    // commit names its file.)
+    let exported = {
+        let held = snell::atomic::hold();
+        povray::export(&dir, &scene, &vol, &opts)
+            .map_err(anyhow::Error::from)
+            .and_then(|ex| held.commit().map(|()| ex).map_err(anyhow::Error::from))
     };
-    drop(held);
+    if exported.is_err() && created {
+        let _ = std::fs::remove_dir(&a.dir);
+    }
+    let ex = exported?;
     // POV-Ray interpolates trilinearly or by Catmull-Rom only: a scene of
     // another filter is exported with the nearest, another surface.
     let pov_filter = ex.interpolation.filter();

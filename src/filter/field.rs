@@ -52,6 +52,17 @@ macro_rules! with_support {
     };
 }
 
+/// What a field built from `vol` keeps its coefficients relative to: the
+/// volume's offset, or `0.0` (not `-0.0`) for a volume without one, so the
+/// coefficients of such a volume are its samples bit for bit.
+pub fn volume_frame(vol: &Volume) -> f64 {
+    if vol.offset() == 0.0 {
+        0.0
+    } else {
+        vol.offset()
+    }
+}
+
 /// A reconstructed volume: coefficients + kernel, evaluable anywhere.
 /// `T` is the coefficient storage ([`Coefficient`]); arithmetic is `f64`.
 ///
@@ -74,17 +85,6 @@ macro_rules! with_support {
 /// data's scale over 2048; and scaled, so that a field of any magnitude
 /// lies in `f16`'s normal range, neither in its subnormals (a field of
 /// values near 1e-9 would round to zero) nor beyond 65504.
-/// What a field built from `vol` keeps its coefficients relative to: the
-/// volume's offset, or `0.0` (not `-0.0`) for a volume without one, so the
-/// coefficients of such a volume are its samples bit for bit.
-pub fn volume_frame(vol: &Volume) -> f64 {
-    if vol.offset() == 0.0 {
-        0.0
-    } else {
-        vol.offset()
-    }
-}
-
 #[derive(Clone, Debug)]
 pub struct Field<T: Coefficient = f64> {
     kind: FilterKind,
@@ -293,7 +293,7 @@ impl<T: Coefficient> Field<T> {
             })
             .map_or(0.0, power);
         let bound = bound.max(1e6 * typical);
-        if bound == 0.0 || self.max_abs <= bound {
+        if self.max_abs <= bound {
             return self.max_abs;
         }
         (0..=exponent(bound))
